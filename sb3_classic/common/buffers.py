@@ -1,0 +1,222 @@
+"""The rollout buffer shared by REINFORCE and n-step SARSA: whole trajectories, kept across updates until used."""
+
+from typing import Any, NamedTuple
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.buffers import BaseBuffer
+
+Observations = np.ndarray | dict[str, np.ndarray]
+
+
+class TrajectorySamples(NamedTuple):
+    """
+    Everything the buffer holds, time-major (``[t, env, ...]``), as views of its storage.
+
+    ``pending`` marks the transitions not trained on yet; the rows before them are kept only as far as
+    another env still needs them.
+    """
+
+    observations: Observations
+    actions: np.ndarray
+    rewards: np.ndarray
+    dones: np.ndarray
+    truncated: np.ndarray
+    final_observations: Observations
+    episode_steps: np.ndarray
+    pending: np.ndarray
+
+
+class TrainingBatch(NamedTuple):
+    """
+    The transitions of one update, as tensors, with what they are trained towards.
+
+    ``trained`` locates them in the buffer's ``get()`` arrays, to mark them trained after the update.
+    """
+
+    observations: th.Tensor | dict[str, th.Tensor]
+    actions: th.Tensor
+    targets: th.Tensor
+    episode_steps: th.Tensor
+    trained: np.ndarray
+
+
+def select(observations: Observations, index: Any) -> Observations:
+    """Index an observation array, or each array of a ``Dict`` observation."""
+    if isinstance(observations, dict):
+        return {key: obs[index] for key, obs in observations.items()}
+    return observations[index]
+
+
+def _allocate(space: spaces.Space, shape: tuple[int, ...]) -> Observations:
+    if isinstance(space, spaces.Dict):
+        return {key: _allocate(subspace, shape) for key, subspace in space.spaces.items()}  # type: ignore[misc]
+    assert space.shape is not None
+    return np.zeros(shape + space.shape, dtype=space.dtype)
+
+
+def _write(storage: Observations, index: Any, values: Observations) -> None:
+    if isinstance(storage, dict):
+        assert isinstance(values, dict)
+        for key in storage:
+            storage[key][index] = values[key]
+    else:
+        storage[index] = values
+
+
+class TrajectoryBuffer(BaseBuffer):
+    """
+    Stores the steps of ``n_envs`` environments in lockstep, time-major, and keeps every transition until the
+    algorithm has trained on it. An update can then use whatever its targets need (whole episodes for REINFORCE,
+    n further steps for n-step SARSA) even when that spans several rollouts: nothing is dropped and nothing is
+    cut short at a rollout boundary. Storage grows (doubling) as needed.
+
+    For each env, the transitions not trained on yet are a suffix of its steps (both algorithms' targets become
+    known in time order); ``mark_trained`` advances that suffix and drops the rows no env needs any more.
+
+    :param buffer_size: initial capacity in steps per env (grows when full)
+    :param observation_space: observation space
+    :param action_space: action space
+    :param device: PyTorch device of the tensors the algorithms build from this buffer
+    :param n_envs: number of parallel environments
+    """
+
+    observations: Observations
+    final_observations: Observations
+
+    def __init__(
+        self,
+        buffer_size: int,
+        observation_space: spaces.Space,
+        action_space: spaces.Space,
+        device: th.device | str = "auto",
+        n_envs: int = 1,
+    ):
+        super().__init__(buffer_size, observation_space, action_space, device, n_envs=n_envs)
+        # Integer actions (Discrete, MultiDiscrete) stay integers: they index logits and Q-values
+        integer_actions = isinstance(action_space, (spaces.Discrete, spaces.MultiDiscrete))
+        self.action_dtype = np.int64 if integer_actions else np.float32
+        self._allocate(buffer_size)
+        self.reset()
+
+    def _allocate(self, capacity: int) -> None:
+        shape = (capacity, self.n_envs)
+        self.observations = _allocate(self.observation_space, shape)
+        # Only written where an episode was truncated: the state to bootstrap from
+        self.final_observations = _allocate(self.observation_space, shape)
+        assert self.action_space.shape is not None
+        self.actions = np.zeros(shape + self.action_space.shape, dtype=self.action_dtype)
+        self.rewards = np.zeros(shape, dtype=np.float32)
+        self.dones = np.zeros(shape, dtype=bool)
+        self.truncated = np.zeros(shape, dtype=bool)
+        self.episode_steps = np.zeros(shape, dtype=np.int64)
+        self.buffer_size = capacity
+
+    def reset(self) -> None:
+        """Forget everything, including the episodes in progress (call it when the envs are reset)."""
+        super().reset()
+        # First row not trained on yet, per env
+        self.start = np.zeros(self.n_envs, dtype=np.int64)
+        # Steps taken so far in the episode each env is running
+        self.episode_length = np.zeros(self.n_envs, dtype=np.int64)
+
+    def add(
+        self,
+        obs: Observations,
+        actions: np.ndarray,
+        rewards: np.ndarray,
+        dones: np.ndarray,
+        truncated: np.ndarray,
+        final_observations: dict[int, Any],
+    ) -> None:
+        """
+        Append one step of every env.
+
+        :param obs: S_t, the observations the actions were chosen from
+        :param actions: A_t
+        :param rewards: R_{t+1}
+        :param dones: whether the episode ended with this step
+        :param truncated: whether it ended by a time limit (its final state is then bootstrapped from)
+        :param final_observations: S_{t+1} of the truncated envs, by env index
+        """
+        if self.pos == self.buffer_size:
+            self._grow()
+        row = self.pos
+        _write(self.observations, row, obs)
+        self.actions[row] = actions
+        self.rewards[row] = rewards
+        self.dones[row] = dones
+        self.truncated[row] = truncated
+        self.episode_steps[row] = self.episode_length
+        for env_idx, final_obs in final_observations.items():
+            _write(self.final_observations, (row, env_idx), final_obs)
+        self.episode_length += 1
+        self.episode_length[dones] = 0
+        self.pos += 1
+
+    def truncate(self, env_indices: np.ndarray, final_observations: Observations) -> None:
+        """
+        End the running episodes of ``env_indices`` at the last step added, as a time limit would
+        (the envs themselves go on: what follows counts as a new episode).
+
+        :param env_indices: the envs whose episodes to cut
+        :param final_observations: the current observations of those envs, bootstrapped from
+        """
+        row = self.pos - 1
+        self.dones[row, env_indices] = True
+        self.truncated[row, env_indices] = True
+        _write(self.final_observations, (row, env_indices), final_observations)
+        self.episode_length[env_indices] = 0
+
+    def get(self) -> TrajectorySamples:
+        """:return: views of the stored steps, oldest first"""
+        rows = slice(0, self.pos)
+        return TrajectorySamples(
+            observations=select(self.observations, rows),
+            actions=self.actions[rows],
+            rewards=self.rewards[rows],
+            dones=self.dones[rows],
+            truncated=self.truncated[rows],
+            final_observations=select(self.final_observations, rows),
+            episode_steps=self.episode_steps[rows],
+            pending=np.arange(self.pos)[:, None] >= self.start,
+        )
+
+    def mark_trained(self, trained: np.ndarray) -> None:
+        """
+        Record that the algorithm trained on ``trained`` (a prefix of each env's pending transitions) and drop
+        the rows that no env needs any more.
+
+        :param trained: boolean mask of shape (pos, n_envs)
+        """
+        pending = np.arange(self.pos)[:, None] >= self.start
+        assert not (trained & ~pending).any(), "trained on a transition twice"
+        remaining = pending & ~trained
+        # Each env's remaining transitions must stay a suffix: its first remaining row is its new start
+        self.start = np.where(remaining.any(axis=0), remaining.argmax(axis=0), self.pos)
+        assert (remaining == (np.arange(self.pos)[:, None] >= self.start)).all(), "targets must complete in time order"
+        self._drop_rows(int(self.start.min()))
+
+    def _drop_rows(self, n_rows: int) -> None:
+        if n_rows == 0:
+            return
+        for array in self._arrays():
+            array[: self.pos - n_rows] = array[n_rows : self.pos]
+        self.pos -= n_rows
+        self.start -= n_rows
+
+    def _grow(self) -> None:
+        old = self._arrays()
+        self._allocate(2 * self.buffer_size)
+        for new_array, old_array in zip(self._arrays(), old, strict=True):
+            new_array[: self.pos] = old_array[: self.pos]
+
+    def _arrays(self) -> list[np.ndarray]:
+        arrays = [self.actions, self.rewards, self.dones, self.truncated, self.episode_steps]
+        for observations in (self.observations, self.final_observations):
+            arrays += list(observations.values()) if isinstance(observations, dict) else [observations]
+        return arrays
+
+    def _get_samples(self, batch_inds: np.ndarray, env: Any = None) -> Any:
+        raise NotImplementedError("TrajectoryBuffer is read whole with get(): its algorithms train on every transition")

@@ -1,0 +1,370 @@
+"""The base class of sb3_classic's algorithms: SB3's on-policy loop around a buffer that keeps whole trajectories."""
+
+import math
+import warnings
+from abc import abstractmethod
+from collections.abc import Sequence
+from typing import Any, TypeVar
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.common.utils import obs_as_tensor, update_learning_rate
+from stable_baselines3.common.vec_env import VecEnv
+
+from sb3_classic.common.buffers import Observations, TrajectoryBuffer, select
+from sb3_classic.common.schedules import StepDecay
+from sb3_classic.common.utils import check_choice, check_learning_rate, check_positive_int, check_range
+
+SelfClassicOnPolicyAlgorithm = TypeVar("SelfClassicOnPolicyAlgorithm", bound="ClassicOnPolicyAlgorithm")
+
+
+class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
+    """
+    Base of REINFORCE and n-step SARSA. What they share:
+
+    - a ``TrajectoryBuffer`` that keeps each transition until its target is known, so an episode (REINFORCE) or an
+      n-step window (SARSA) may span several rollouts and envs may end their episodes at different times;
+    - the rollout loop, which stops when the algorithm says its update has what it needs
+      (``_rollout_complete``); the time-limit bootstrap; an optional cap on episode length;
+    - learning rates given as SB3 schedules (of the training progress) times a step decay (of the completed
+      episodes or updates, like the seed report's ``StepLR``), and that training state kept across ``learn()``
+      calls and ``save``/``load``;
+    - ``set_env`` with another number of envs.
+
+    :param policy: the policy model to use (``"MlpPolicy"``, ``"CnnPolicy"``, ``"MultiInputPolicy"`` or a class)
+    :param env: the environment to learn from (if registered in Gymnasium, can be str)
+    :param learning_rate: learning rate (a float or an SB3 schedule of the remaining progress)
+    :param n_steps: passed to ``OnPolicyAlgorithm``; its meaning is the subclass's
+    :param gamma: discount factor γ
+    :param max_grad_norm: gradient-norm clipping threshold; ``None`` for no clipping
+    :param lr_decay_factor: multiply the learning rate(s) by this at each decay (1.0: no decay)
+    :param lr_decay_every: decay every this many ``lr_decay_unit`` (like PyTorch's ``StepLR(step_size=...)``)
+    :param lr_decay_milestones: decay when the count of ``lr_decay_unit`` reaches each of these instead
+        (like ``MultiStepLR``)
+    :param lr_decay_unit: what the decay counts: ``"episode"`` (completed episodes, all envs together)
+        or ``"update"`` (gradient updates)
+    :param handle_timeout_termination: bootstrap from the value of the final state when an episode is cut by a time
+        limit (``TimeLimit.truncated``), treating the limit as not part of the task (SB3's default); if False,
+        a truncation ends the return like a termination
+    :param max_episode_length: cut any episode that reaches this many steps as a time limit would (with a warning),
+        so an env that never ends cannot grow the buffer without bound; ``None`` for no cap
+    :param stats_window_size: window size for the rollout logging, in episodes
+    :param tensorboard_log: the log location for TensorBoard (if None, no logging)
+    :param policy_kwargs: additional arguments to be passed to the policy on creation
+    :param verbose: verbosity level: 0 no output, 1 info, 2 debug
+    :param seed: seed for the pseudo random generators
+    :param device: device (cpu, cuda, ...) on which the code should be run
+    :param supported_action_spaces: the action spaces the subclass supports
+    :param _init_setup_model: whether or not to build the network at the creation of the instance
+    """
+
+    rollout_buffer: TrajectoryBuffer  # type: ignore[assignment]
+    policy: BasePolicy  # type: ignore[assignment]
+    lr_decay: StepDecay
+
+    def __init__(
+        self,
+        policy: str | type[BasePolicy],
+        env: GymEnv | str,
+        learning_rate: float | Schedule,
+        n_steps: int,
+        gamma: float,
+        max_grad_norm: float | None,
+        lr_decay_factor: float,
+        lr_decay_every: int | None,
+        lr_decay_milestones: Sequence[int] | None,
+        lr_decay_unit: str,
+        handle_timeout_termination: bool,
+        max_episode_length: int | None,
+        stats_window_size: int,
+        tensorboard_log: str | None,
+        policy_kwargs: dict[str, Any] | None,
+        verbose: int,
+        seed: int | None,
+        device: th.device | str,
+        supported_action_spaces: tuple[type[spaces.Space], ...],
+        _init_setup_model: bool,
+    ):
+        super().__init__(
+            policy,  # type: ignore[arg-type]
+            env,
+            learning_rate=learning_rate,
+            n_steps=n_steps,
+            gamma=gamma,
+            # Unused: returns are Monte-Carlo (REINFORCE) or n-step (SARSA), not GAE
+            gae_lambda=1.0,
+            # Set by REINFORCE; a Q-network has no policy entropy
+            ent_coef=0.0,
+            # Unused: REINFORCE's value network has its own optimizer and learning rate, SARSA has no value network
+            vf_coef=0.0,
+            max_grad_norm=math.inf if max_grad_norm is None else max_grad_norm,
+            # gSDE is for continuous actions of actor-critic methods
+            use_sde=False,
+            sde_sample_freq=-1,
+            # Unused: the algorithms build their own TrajectoryBuffer
+            rollout_buffer_class=None,
+            rollout_buffer_kwargs=None,
+            stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log,
+            policy_kwargs=policy_kwargs,
+            verbose=verbose,
+            seed=seed,
+            device=device,
+            _init_setup_model=False,
+            # Checked below with an error that says what to do (SB3 asserts)
+            supported_action_spaces=None,
+        )
+        self.lr_decay_factor = lr_decay_factor
+        self.lr_decay_every = lr_decay_every
+        self.lr_decay_milestones = lr_decay_milestones
+        self.lr_decay_unit = lr_decay_unit
+        self.handle_timeout_termination = handle_timeout_termination
+        self.max_episode_length = max_episode_length
+        # Training state the count-driven schedules follow; unlike num_timesteps, learn() never resets it
+        self._completed_episodes = 0
+        if self.env is not None and not isinstance(self.action_space, supported_action_spaces):
+            raise ValueError(self._unsupported_action_space_message(supported_action_spaces))
+
+    def _unsupported_action_space_message(self, supported: tuple[type[spaces.Space], ...]) -> str:
+        names = ", ".join(space.__name__ for space in supported)
+        return f"{type(self).__name__} supports {names} action spaces, not {self.action_space}"
+
+    def _check_arguments(self) -> None:
+        """Raise a ValueError naming the argument for anything invalid; subclasses extend it."""
+        check_learning_rate("learning_rate", self.learning_rate)
+        check_range("gamma", self.gamma, 0.0, 1.0, hint="0.99 is the usual choice")
+        if not self.max_grad_norm > 0:
+            raise ValueError(f"max_grad_norm={self.max_grad_norm!r} must be > 0, or None for no clipping")
+        check_range("lr_decay_factor", self.lr_decay_factor, 0.0, 1.0, low_open=True, hint="1.0 means no decay")
+        check_choice("lr_decay_unit", self.lr_decay_unit, ("episode", "update"))
+        if self.lr_decay_every is not None:
+            check_positive_int("lr_decay_every", self.lr_decay_every)
+            if self.lr_decay_milestones is not None:
+                raise ValueError("Pass lr_decay_every or lr_decay_milestones, not both")
+        if self.lr_decay_milestones is not None:
+            for milestone in self.lr_decay_milestones:
+                check_positive_int("lr_decay_milestones[...]", milestone)
+        if self.max_episode_length is not None:
+            check_positive_int("max_episode_length", self.max_episode_length, hint="or None for no cap")
+
+    @abstractmethod
+    def _make_policy(self) -> BasePolicy:
+        """Build the policy (networks and optimizers) for the current spaces and arguments."""
+
+    def _initial_buffer_size(self) -> int:
+        """:return: the buffer's initial capacity in steps per env (it grows when needed)"""
+        return 1024
+
+    def _setup_model(self) -> None:
+        self._check_arguments()
+        self._setup_lr_schedule()
+        self.lr_decay = StepDecay(self.lr_decay_factor, self.lr_decay_every, self.lr_decay_milestones)
+        self.set_random_seed(self.seed)
+        self._make_buffer()
+        self.policy = self._make_policy().to(self.device)
+
+    def _make_buffer(self) -> None:
+        self.rollout_buffer = TrajectoryBuffer(
+            self._initial_buffer_size(), self.observation_space, self.action_space, device=self.device, n_envs=self.n_envs
+        )
+        # Reused when no env is truncated (the common case of the per-step loop)
+        self._no_truncation = np.zeros(self.n_envs, dtype=bool)
+
+    def _lr_decay_count(self) -> int:
+        return self._completed_episodes if self.lr_decay_unit == "episode" else self._n_updates
+
+    def _update_learning_rates(self, schedules: Sequence[tuple[th.optim.Optimizer, Schedule, str]]) -> None:
+        """
+        Set each optimizer's learning rate to its schedule's value at the current progress, times the step decay,
+        and log it.
+
+        :param schedules: (optimizer, learning-rate schedule, logger key) triples
+        """
+        decay = self.lr_decay(self._lr_decay_count())
+        for optimizer, schedule, key in schedules:
+            learning_rate = schedule(self._current_progress_remaining) * decay
+            update_learning_rate(optimizer, learning_rate)
+            self.logger.record(key, learning_rate)
+
+    def _clip_gradients(self, parameters: Any) -> None:
+        if math.isfinite(self.max_grad_norm):
+            th.nn.utils.clip_grad_norm_(parameters, self.max_grad_norm)
+
+    @abstractmethod
+    def _sample_actions(self, obs: th.Tensor | dict[str, th.Tensor]) -> np.ndarray:
+        """
+        The behaviour policy of the per-step loop: one action per env, as a NumPy array the env accepts.
+
+        :param obs: the current observations of all envs
+        """
+
+    @abstractmethod
+    def _rollout_complete(self, n_steps: int, n_episodes: int) -> bool:
+        """
+        Whether the next update has what it needs.
+
+        :param n_steps: steps taken per env in this rollout
+        :param n_episodes: episodes that ended in this rollout (all envs together)
+        """
+
+    def _on_episodes_end(self, n_episodes: int) -> None:
+        """
+        Called after each step in which episodes ended.
+
+        :param n_episodes: how many ended (all envs together)
+        """
+        self._completed_episodes += n_episodes
+
+    def _episode_ends(
+        self, new_obs: Observations, dones: np.ndarray, infos: list[dict[str, Any]]
+    ) -> tuple[np.ndarray, np.ndarray, dict[int, Any]]:
+        """
+        :return: which episodes ended with this step, which of those to bootstrap from (time-limit truncations,
+            and episodes cut at ``max_episode_length``), and the final observations to bootstrap from, by env
+        """
+        ends, truncated = dones, self._no_truncation
+        final_observations: dict[int, Any] = {}
+        if self.handle_timeout_termination and dones.any():
+            truncated = np.zeros_like(dones)
+            for idx in np.flatnonzero(dones):
+                # The VecEnv sets TimeLimit.truncated = truncated and not terminated
+                if infos[idx].get("TimeLimit.truncated", False) and infos[idx].get("terminal_observation") is not None:
+                    truncated[idx] = True
+                    final_observations[int(idx)] = infos[idx]["terminal_observation"]
+        if self.max_episode_length is not None:
+            overlong = ~dones & (self.rollout_buffer.episode_length + 1 >= self.max_episode_length)
+            if overlong.any():
+                warnings.warn(
+                    f"Episodes of envs {np.flatnonzero(overlong).tolist()} reached max_episode_length="
+                    f"{self.max_episode_length} steps without ending: {type(self).__name__} cut them there as a time "
+                    "limit would. Wrap the env in gymnasium.wrappers.TimeLimit, or raise max_episode_length.",
+                    stacklevel=3,
+                )
+                ends = dones | overlong
+                truncated = truncated | (overlong & self.handle_timeout_termination)
+                if self.handle_timeout_termination:
+                    final_observations.update({int(idx): select(new_obs, idx) for idx in np.flatnonzero(overlong)})
+        return ends, truncated, final_observations
+
+    def collect_rollouts(  # type: ignore[override]
+        self,
+        env: VecEnv,
+        callback: BaseCallback,
+        rollout_buffer: TrajectoryBuffer,
+        n_rollout_steps: int | None = None,
+    ) -> bool:
+        """
+        Step the envs with the behaviour policy and append the transitions to ``rollout_buffer``, which keeps
+        those of earlier rollouts not trained on yet.
+
+        :param env: the training environment
+        :param callback: callback called at each step (and at the beginning and end of the rollout)
+        :param rollout_buffer: buffer to fill
+        :param n_rollout_steps: steps per env to collect; ``None`` (what ``learn`` passes) stops when the
+            algorithm's update has what it needs (``n_episodes`` episodes for REINFORCE, ``train_freq`` steps for
+            SARSA)
+        :return: False if the callback stopped training
+        """
+        assert self._last_obs is not None, "No previous observation was provided"
+        self.policy.set_training_mode(False)
+        callback.on_rollout_start()
+        n_steps, n_episodes = 0, 0
+        while True:
+            if n_rollout_steps is None:
+                if self._rollout_complete(n_steps, n_episodes):
+                    break
+            elif n_steps >= n_rollout_steps:
+                break
+            with th.no_grad():
+                actions = self._sample_actions(obs_as_tensor(self._last_obs, self.device))  # type: ignore[arg-type]
+            env_actions = actions
+            if isinstance(self.action_space, spaces.Box):
+                # The Gaussian is unbounded: clip what the env sees, store what was sampled
+                env_actions = np.clip(actions, self.action_space.low, self.action_space.high)
+            new_obs, rewards, dones, infos = env.step(env_actions)
+            self.num_timesteps += env.num_envs
+            n_steps += 1
+
+            ends, truncated, final_observations = self._episode_ends(new_obs, dones, infos)  # type: ignore[arg-type]
+            # Stored before the callback, so that a callback stopping training leaves the buffer consistent
+            rollout_buffer.add(self._last_obs, actions, rewards, ends, truncated, final_observations)  # type: ignore[arg-type]
+            self._last_obs = new_obs  # type: ignore[assignment]
+            self._last_episode_starts = dones
+            self._update_info_buffer(infos, dones)
+            if ends.any():
+                n_episodes += int(ends.sum())
+                self._on_episodes_end(int(ends.sum()))
+
+            # Give access to local variables
+            callback.update_locals(locals())
+            if not callback.on_step():
+                return False
+
+        callback.update_locals(locals())
+        callback.on_rollout_end()
+        return True
+
+    def learn(
+        self: SelfClassicOnPolicyAlgorithm,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 1,
+        tb_log_name: str = "ClassicOnPolicyAlgorithm",
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfClassicOnPolicyAlgorithm:
+        iteration = 0
+        total_timesteps, callback = self._setup_learn(
+            total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar
+        )
+        callback.on_training_start(locals(), globals())
+        assert self.env is not None
+
+        while self.num_timesteps < total_timesteps:
+            if not self.collect_rollouts(self.env, callback, self.rollout_buffer):
+                break
+            iteration += 1
+            self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
+            if log_interval is not None and iteration % log_interval == 0:
+                self.dump_logs(iteration)
+            self.train()
+
+        callback.on_training_end()
+        return self
+
+    def _setup_learn(
+        self,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        reset_num_timesteps: bool = True,
+        tb_log_name: str = "run",
+        progress_bar: bool = False,
+    ) -> tuple[int, BaseCallback]:
+        if reset_num_timesteps or self._last_obs is None:
+            # The envs are about to be reset: the episodes in progress in the buffer cannot be continued
+            self.rollout_buffer.reset()
+        return super()._setup_learn(total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar)
+
+    def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
+        """
+        Set the environment to learn from. Unlike SB3's on-policy algorithms, the number of envs may change:
+        the buffer is rebuilt for it (the episodes in progress are dropped with the old envs).
+
+        :param env: the new environment (same observation and action spaces)
+        :param force_reset: reset the envs before training (required when the number of envs changes)
+        """
+        env = self._wrap_env(env, self.verbose)
+        if env.num_envs != self.n_envs:
+            if not force_reset:
+                raise ValueError(
+                    f"set_env(force_reset=False) needs the same number of envs ({self.n_envs}), got {env.num_envs}: "
+                    "pass force_reset=True to start new episodes in the new envs"
+                )
+            self.n_envs = env.num_envs
+            self._make_buffer()
+        super().set_env(env, force_reset=force_reset)

@@ -1,0 +1,55 @@
+"""Argument checks shared by the algorithms: each error names the argument, the value and what to pass instead."""
+
+from collections.abc import Sequence
+from typing import Any
+
+from stable_baselines3.common.type_aliases import Schedule
+from stable_baselines3.common.utils import FloatSchedule
+
+
+def check_learning_rate(name: str, value: float | Schedule) -> None:
+    """
+    :param name: the argument's name
+    :param value: a positive float, or an SB3 schedule whose values are positive
+    """
+    try:
+        start, end = FloatSchedule(value)(1.0), FloatSchedule(value)(0.0)
+    except (AssertionError, TypeError) as error:
+        raise TypeError(f"{name}={value!r} must be a float or an SB3 schedule (e.g. LinearSchedule)") from error
+    if not start > 0 or not end >= 0:
+        raise ValueError(f"{name}={value!r} must be > 0 (a learning rate of {start} at the start, {end} at the end)")
+
+
+def check_range(name: str, value: Any, low: float, high: float, *, low_open: bool = False, hint: str = "") -> None:
+    """
+    :param name: the argument's name
+    :param value: the number to check
+    :param low: smallest allowed value
+    :param high: largest allowed value
+    :param low_open: exclude ``low`` itself
+    :param hint: what to pass instead, appended to the message
+    """
+    ok = isinstance(value, (int, float)) and (low < value if low_open else low <= value) and value <= high
+    if not ok:
+        interval = f"{'(' if low_open else '['}{low}, {high}]"
+        raise ValueError(f"{name}={value!r} must be a number in {interval}{'. ' + hint if hint else ''}")
+
+
+def check_positive_int(name: str, value: Any, hint: str = "") -> None:
+    """
+    :param name: the argument's name
+    :param value: the value to check
+    :param hint: what to pass instead, appended to the message
+    """
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ValueError(f"{name}={value!r} must be an integer >= 1{'. ' + hint if hint else ''}")
+
+
+def check_choice(name: str, value: Any, choices: Sequence[str]) -> None:
+    """
+    :param name: the argument's name
+    :param value: the value to check
+    :param choices: allowed values
+    """
+    if value not in choices:
+        raise ValueError(f"{name}={value!r} must be one of {', '.join(map(repr, choices))}")

@@ -1,0 +1,4 @@
+from sb3_classic.reinforce.policies import CnnPolicy, MlpPolicy, MultiInputPolicy
+from sb3_classic.reinforce.reinforce import REINFORCE
+
+__all__ = ["REINFORCE", "CnnPolicy", "MlpPolicy", "MultiInputPolicy"]

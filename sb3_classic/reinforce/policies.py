@@ -1,0 +1,164 @@
+"""Policies of REINFORCE with baseline: a policy network π(a|s, θ) and a state-value network v̂(s, w)."""
+
+from typing import Any
+
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.policies import ActorCriticPolicy
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, CombinedExtractor, FlattenExtractor, NatureCNN
+from stable_baselines3.common.type_aliases import Schedule
+from torch import nn
+
+from sb3_classic.common.torch_layers import check_weight_init, kaiming_init, make_activation
+
+
+class REINFORCEPolicy(ActorCriticPolicy):
+    """
+    The two networks of REINFORCE with baseline (Sutton & Barto §13.4): the policy π(a|s, θ) and the baseline
+    v̂(s, w). They are separate networks by default (``net_arch=dict(pi=[64, 64], vf=[64, 64])``, no shared
+    features extractor) with separate optimizers, so each has its own learning rate (α^θ and α^w).
+    The action distributions are SB3's (Discrete, Box, MultiDiscrete, MultiBinary).
+
+    :param observation_space: observation space
+    :param action_space: action space
+    :param lr_schedule: learning-rate schedule of the policy network (α^θ)
+    :param value_lr_schedule: learning-rate schedule of the value network (α^w); ``lr_schedule`` if None
+    :param net_arch: hidden layers, e.g. ``[64, 64]`` for both networks or ``dict(pi=[64, 64], vf=[256])``
+    :param activation_fn: activation class of the hidden layers
+    :param activation_kwargs: arguments of ``activation_fn``, e.g. ``dict(negative_slope=0.1)`` for ``nn.LeakyReLU``
+    :param weight_init: ``"orthogonal"`` (SB3's A2C/PPO scheme), ``"kaiming"`` (He initialisation of the hidden
+        layers; output layers keep PyTorch's default) or ``"default"`` (PyTorch's default everywhere)
+    :param log_std_init: initial log standard deviation of Gaussian actions (Box action spaces)
+    :param features_extractor_class: features extractor to use
+    :param features_extractor_kwargs: keyword arguments to pass to the features extractor
+    :param share_features_extractor: share one features extractor between the two networks (its parameters are then
+        trained by the policy optimizer, on the gradient of both losses)
+    :param normalize_images: whether to divide images by 255
+    :param optimizer_class: optimizer of both networks, ``th.optim.Adam`` by default
+    :param optimizer_kwargs: additional keyword arguments, excluding the learning rate, to pass to both optimizers
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Space,
+        lr_schedule: Schedule,
+        value_lr_schedule: Schedule | None = None,
+        net_arch: list[int] | dict[str, list[int]] | None = None,
+        activation_fn: type[nn.Module] = nn.Tanh,
+        activation_kwargs: dict[str, Any] | None = None,
+        weight_init: str = "orthogonal",
+        log_std_init: float = 0.0,
+        features_extractor_class: type[BaseFeaturesExtractor] = FlattenExtractor,
+        features_extractor_kwargs: dict[str, Any] | None = None,
+        share_features_extractor: bool = False,
+        normalize_images: bool = True,
+        optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
+        optimizer_kwargs: dict[str, Any] | None = None,
+    ):
+        check_weight_init(weight_init)
+        super().__init__(
+            observation_space,
+            action_space,
+            lr_schedule,
+            net_arch=net_arch,
+            activation_fn=make_activation(activation_fn, activation_kwargs),
+            ortho_init=weight_init == "orthogonal",
+            log_std_init=log_std_init,
+            features_extractor_class=features_extractor_class,
+            features_extractor_kwargs=features_extractor_kwargs,
+            share_features_extractor=share_features_extractor,
+            normalize_images=normalize_images,
+            optimizer_class=optimizer_class,
+            optimizer_kwargs=optimizer_kwargs,
+        )
+        self.activation_fn = activation_fn
+        self.activation_kwargs = activation_kwargs
+        self.weight_init = weight_init
+        if weight_init == "kaiming":
+            hidden = {self.pi_features_extractor, self.vf_features_extractor, self.mlp_extractor}
+            kaiming_init(hidden, activation_fn, activation_kwargs)
+
+        # Two optimizers instead of ActorCriticPolicy's one: α^θ for the policy network, α^w for the value network
+        value_modules = [self.mlp_extractor.value_net, self.value_net]
+        if not share_features_extractor:
+            value_modules.append(self.vf_features_extractor)
+        value_parameters = [param for module in value_modules for param in module.parameters()]
+        value_ids = {id(param) for param in value_parameters}
+        policy_parameters = [param for param in self.parameters() if id(param) not in value_ids]
+        value_lr_schedule = value_lr_schedule or lr_schedule
+        self.optimizer = self.optimizer_class(policy_parameters, lr=lr_schedule(1), **self.optimizer_kwargs)  # type: ignore[call-arg]
+        self.value_optimizer = self.optimizer_class(value_parameters, lr=value_lr_schedule(1), **self.optimizer_kwargs)  # type: ignore[call-arg]
+
+    @property
+    def value_parameters(self) -> list[nn.Parameter]:
+        """The parameters ``value_optimizer`` trains (w)."""
+        return [param for group in self.value_optimizer.param_groups for param in group["params"]]
+
+    @property
+    def policy_parameters(self) -> list[nn.Parameter]:
+        """The parameters ``optimizer`` trains (θ)."""
+        return [param for group in self.optimizer.param_groups for param in group["params"]]
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        data = super()._get_constructor_parameters()
+        for unsupported in ("use_sde", "squash_output", "full_std", "use_expln", "ortho_init"):
+            data.pop(unsupported)
+        data.update(
+            activation_fn=self.activation_fn,
+            activation_kwargs=self.activation_kwargs,
+            weight_init=self.weight_init,
+            share_features_extractor=self.share_features_extractor,
+        )
+        return data
+
+
+class REINFORCECnnPolicy(REINFORCEPolicy):
+    """
+    ``REINFORCEPolicy`` with SB3's NatureCNN features extractor, for image observations.
+
+    :param observation_space: observation space
+    :param action_space: action space
+    :param lr_schedule: learning-rate schedule of the policy network (α^θ)
+    :param kwargs: the other arguments of ``REINFORCEPolicy``
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Space,
+        lr_schedule: Schedule,
+        features_extractor_class: type[BaseFeaturesExtractor] = NatureCNN,
+        **kwargs: Any,
+    ):
+        super().__init__(
+            observation_space, action_space, lr_schedule, features_extractor_class=features_extractor_class, **kwargs
+        )
+
+
+class REINFORCEMultiInputPolicy(REINFORCEPolicy):
+    """
+    ``REINFORCEPolicy`` with SB3's CombinedExtractor, for ``Dict`` observations.
+
+    :param observation_space: observation space
+    :param action_space: action space
+    :param lr_schedule: learning-rate schedule of the policy network (α^θ)
+    :param kwargs: the other arguments of ``REINFORCEPolicy``
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Space,
+        lr_schedule: Schedule,
+        features_extractor_class: type[BaseFeaturesExtractor] = CombinedExtractor,
+        **kwargs: Any,
+    ):
+        super().__init__(
+            observation_space, action_space, lr_schedule, features_extractor_class=features_extractor_class, **kwargs
+        )
+
+
+MlpPolicy = REINFORCEPolicy
+CnnPolicy = REINFORCECnnPolicy
+MultiInputPolicy = REINFORCEMultiInputPolicy

@@ -1,0 +1,274 @@
+from collections.abc import Sequence
+from typing import Any, ClassVar, TypeVar
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.common.utils import FloatSchedule, explained_variance, obs_as_tensor
+
+from sb3_classic.common.buffers import TrainingBatch, select
+from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
+from sb3_classic.common.returns import discounted_returns
+from sb3_classic.common.utils import check_learning_rate, check_positive_int, check_range
+from sb3_classic.reinforce.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, REINFORCEPolicy
+
+SelfREINFORCE = TypeVar("SelfREINFORCE", bound="REINFORCE")
+
+
+class REINFORCE(ClassicOnPolicyAlgorithm):
+    """
+    REINFORCE with baseline: Monte-Carlo policy gradient with a learned state-value baseline
+    (Williams 1992; Sutton & Barto, Reinforcement Learning: An Introduction, 2nd ed., §13.4).
+
+    Each update uses ``n_episodes`` complete episodes. For every step t of them, with the Monte-Carlo return
+    G_t = Σ_{k=t+1}^{T} γ^{k−t−1} R_k and δ_t = G_t − v̂(S_t, w):
+
+    - the value network follows w ← w + α^w δ_t ∇v̂(S_t, w);
+    - the policy network follows θ ← θ + α^θ δ_t ∇ln π(A_t|S_t, θ),
+
+    as one gradient step of each on the mean over the batch. The book's update also has a factor γ^t
+    (``gamma_t_factor=True``). It is off by default, as in most implementations and in the seed report's
+    results: it makes the gradient the exact gradient of the discounted return from the start state, but it
+    scales the updates of late steps down to nothing (γ^500 ≈ 0.007 for γ = 0.99), which slows learning on long
+    episodes.
+
+    With several envs, an update takes every episode that has ended, and an env whose episode is still running
+    keeps it for a later update: nothing is thrown away, and long episodes are not dropped in favour of short
+    ones. (The steps of such an episode taken before an update were sampled by the policy before it; with one
+    env, every update is exactly on-policy.)
+
+    :param policy: the policy model to use (``"MlpPolicy"``, ``"CnnPolicy"``, ``"MultiInputPolicy"``)
+    :param env: the environment to learn from (if registered in Gymnasium, can be str)
+    :param learning_rate: learning rate α^θ of the policy network (a float or an SB3 schedule of the remaining
+        progress); the seed report's best: 0.003 on CartPole-v1, 0.001 on Acrobot-v1
+    :param value_learning_rate: learning rate α^w of the value network (float or SB3 schedule); the seed report's
+        best: 0.01 on CartPole-v1, 0.1 on Acrobot-v1
+    :param n_episodes: complete episodes per update (all envs together; an update takes every episode that has
+        ended, so it may use more)
+    :param gamma: discount factor γ
+    :param gamma_t_factor: multiply the policy gradient of step t by γ^t as in the book (see above)
+    :param normalize_advantage: standardise δ over the batch before the policy gradient (the value network still
+        regresses on the raw returns)
+    :param ent_coef: entropy bonus coefficient of the policy loss
+    :param max_grad_norm: clip the gradient norm of each network to this; None for no clipping
+    :param lr_decay_factor: multiply both learning rates by this at each decay (1.0: no decay)
+    :param lr_decay_every: decay every this many ``lr_decay_unit`` (like PyTorch's ``StepLR``)
+    :param lr_decay_milestones: decay when the count of ``lr_decay_unit`` reaches each of these (like ``MultiStepLR``)
+    :param lr_decay_unit: ``"episode"`` (completed episodes) or ``"update"`` (gradient updates)
+    :param handle_timeout_termination: at a time-limit truncation, bootstrap the return from v̂ of the final state
+        (the time limit is not part of the task: SB3's choice, and the default); if False, the return ends there
+        as at a termination
+    :param max_episode_length: REINFORCE needs episodes that end: one that reaches this many steps is cut there as
+        a time limit would (with a warning), so a never-ending env cannot grow the buffer without bound
+    :param stats_window_size: window size for the rollout logging, in episodes
+    :param tensorboard_log: the log location for TensorBoard (if None, no logging)
+    :param policy_kwargs: additional arguments to be passed to the policy on creation (see ``REINFORCEPolicy``:
+        ``net_arch``, ``activation_fn``, ``activation_kwargs``, ``weight_init``, ...)
+    :param verbose: verbosity level: 0 no output, 1 info, 2 debug
+    :param seed: seed for the pseudo random generators
+    :param device: device (cpu, cuda, ...) on which the code should be run
+    :param _init_setup_model: whether or not to build the network at the creation of the instance
+    """
+
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {
+        "MlpPolicy": MlpPolicy,
+        "CnnPolicy": CnnPolicy,
+        "MultiInputPolicy": MultiInputPolicy,
+    }
+    policy: REINFORCEPolicy
+    value_lr_schedule: Schedule
+
+    def __init__(
+        self,
+        policy: str | type[REINFORCEPolicy],
+        env: GymEnv | str,
+        learning_rate: float | Schedule = 3e-3,
+        value_learning_rate: float | Schedule = 1e-2,
+        n_episodes: int = 1,
+        gamma: float = 0.99,
+        gamma_t_factor: bool = False,
+        normalize_advantage: bool = False,
+        ent_coef: float = 0.0,
+        max_grad_norm: float | None = None,
+        lr_decay_factor: float = 1.0,
+        lr_decay_every: int | None = None,
+        lr_decay_milestones: Sequence[int] | None = None,
+        lr_decay_unit: str = "episode",
+        handle_timeout_termination: bool = True,
+        max_episode_length: int = 100_000,
+        stats_window_size: int = 100,
+        tensorboard_log: str | None = None,
+        policy_kwargs: dict[str, Any] | None = None,
+        verbose: int = 0,
+        seed: int | None = None,
+        device: th.device | str = "auto",
+        _init_setup_model: bool = True,
+    ):
+        super().__init__(
+            policy,
+            env,
+            learning_rate=learning_rate,
+            # Unused: a rollout is n_episodes whole episodes, not a fixed number of steps
+            n_steps=1,
+            gamma=gamma,
+            max_grad_norm=max_grad_norm,
+            lr_decay_factor=lr_decay_factor,
+            lr_decay_every=lr_decay_every,
+            lr_decay_milestones=lr_decay_milestones,
+            lr_decay_unit=lr_decay_unit,
+            handle_timeout_termination=handle_timeout_termination,
+            max_episode_length=max_episode_length,
+            stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log,
+            policy_kwargs=policy_kwargs,
+            verbose=verbose,
+            seed=seed,
+            device=device,
+            supported_action_spaces=(spaces.Discrete, spaces.Box, spaces.MultiDiscrete, spaces.MultiBinary),
+            _init_setup_model=False,
+        )
+        self.value_learning_rate = value_learning_rate
+        self.n_episodes = n_episodes
+        self.gamma_t_factor = gamma_t_factor
+        self.normalize_advantage = normalize_advantage
+        self.ent_coef = ent_coef
+        if _init_setup_model:
+            self._setup_model()
+
+    def _check_arguments(self) -> None:
+        super()._check_arguments()
+        check_learning_rate("value_learning_rate", self.value_learning_rate)
+        check_positive_int("n_episodes", self.n_episodes, hint="1 is the book's algorithm")
+        check_range("ent_coef", self.ent_coef, 0.0, float("inf"), hint="0.0 disables the entropy bonus")
+
+    def _make_policy(self) -> BasePolicy:
+        self.value_lr_schedule = FloatSchedule(self.value_learning_rate)
+        return self.policy_class(
+            self.observation_space,
+            self.action_space,
+            self.lr_schedule,
+            value_lr_schedule=self.value_lr_schedule,
+            **self.policy_kwargs,
+        )
+
+    def _sample_actions(self, obs: th.Tensor | dict[str, th.Tensor]) -> np.ndarray:
+        # A ~ π(·|S, θ); the baseline v̂ is only needed at update time
+        return self.policy.get_distribution(obs).get_actions().cpu().numpy()
+
+    def _rollout_complete(self, n_steps: int, n_episodes: int) -> bool:
+        return n_episodes >= self.n_episodes
+
+    def _training_batch(self) -> TrainingBatch | None:
+        """
+        :return: every step of the complete episodes not trained on yet, with its Monte-Carlo return G_t
+            (None if no episode has ended)
+        """
+        data = self.rollout_buffer.get()
+        # An env's pending steps up to its last episode end form complete episodes; the rest is still running
+        steps = np.arange(len(data.dones))[:, None]
+        last_end = np.where(data.dones, steps, -1).max(axis=0)
+        trained = data.pending & (steps <= last_end)
+        if not trained.any():
+            return None
+        # v̂(S_T, w) of the final states of time-limit truncations, to bootstrap their returns from
+        next_values = np.zeros_like(data.rewards)
+        if data.truncated.any():
+            with th.no_grad():
+                final_obs = obs_as_tensor(select(data.final_observations, data.truncated), self.device)
+                next_values[data.truncated] = self.policy.predict_values(final_obs).flatten().cpu().numpy()
+        returns = discounted_returns(data.rewards, data.dones, next_values, self.gamma)
+        return TrainingBatch(
+            observations=obs_as_tensor(select(data.observations, trained), self.device),
+            actions=th.as_tensor(data.actions[trained], device=self.device),
+            targets=th.as_tensor(returns[trained], device=self.device),
+            episode_steps=th.as_tensor(data.episode_steps[trained], device=self.device),
+            trained=trained,
+        )
+
+    def train(self) -> None:
+        """Update both networks on every complete episode in the buffer (one gradient step each)."""
+        self.policy.set_training_mode(True)
+        self._update_learning_rates(
+            [
+                (self.policy.optimizer, self.lr_schedule, "train/learning_rate"),
+                (self.policy.value_optimizer, self.value_lr_schedule, "train/value_learning_rate"),
+            ]
+        )
+        batch = self._training_batch()
+        if batch is None:
+            return
+        returns = batch.targets
+        values, log_prob, entropy = self.policy.evaluate_actions(batch.observations, batch.actions)
+        values = values.flatten()
+        assert entropy is not None, "the action distributions REINFORCE supports have an entropy"
+
+        # δ_t = G_t − v̂(S_t, w) (S&B §13.4); the baseline is a constant for the policy gradient
+        advantages = returns - values.detach()
+        policy_weights = advantages
+        if self.normalize_advantage and len(advantages) > 1:
+            policy_weights = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+        if self.gamma_t_factor:
+            policy_weights = policy_weights * self.gamma**batch.episode_steps
+        # θ ← θ + α^θ γ^t δ_t ∇ln π(A_t|S_t, θ) (S&B §13.4, eq. 13.11 with b(S_t) = v̂(S_t, w))
+        policy_loss = -(policy_weights * log_prob).mean()
+        # w ← w + α^w δ_t ∇v̂(S_t, w) (S&B §13.4): the gradient of ½ δ_t²
+        value_loss = 0.5 * ((returns - values) ** 2).mean()
+        entropy_loss = -entropy.mean()
+        loss = policy_loss + self.ent_coef * entropy_loss + value_loss
+
+        self.policy.optimizer.zero_grad()
+        self.policy.value_optimizer.zero_grad()
+        loss.backward()
+        self._clip_gradients(self.policy.policy_parameters)
+        self._clip_gradients(self.policy.value_parameters)
+        self.policy.optimizer.step()
+        self.policy.value_optimizer.step()
+
+        self.rollout_buffer.mark_trained(batch.trained)
+        self._n_updates += 1
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        # Every episode in the buffer is held from its first step (t = 0)
+        self.logger.record("train/n_episodes", int((batch.episode_steps == 0).sum()))
+        self.logger.record("train/policy_loss", policy_loss.item())
+        self.logger.record("train/value_loss", value_loss.item())
+        self.logger.record("train/entropy_loss", entropy_loss.item())
+        self.logger.record(
+            "train/explained_variance", explained_variance(values.detach().cpu().numpy(), returns.cpu().numpy())
+        )
+        if hasattr(self.policy, "log_std"):
+            self.logger.record("train/std", th.exp(self.policy.log_std).mean().item())
+
+    def learn(
+        self: SelfREINFORCE,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 10,
+        tb_log_name: str = "REINFORCE",
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfREINFORCE:
+        """
+        Train for at least ``total_timesteps`` env steps (the last update waits for its episodes to end).
+
+        :param total_timesteps: env steps to train for, all envs together
+        :param callback: callback(s) called at every step with the state of the algorithm
+        :param log_interval: updates between two logger dumps
+        :param tb_log_name: the name of the run for TensorBoard logging
+        :param reset_num_timesteps: whether to reset ``num_timesteps`` (and the envs); the learning-rate decay
+            counts keep going either way
+        :param progress_bar: display a progress bar using tqdm and rich
+        :return: the trained model
+        """
+        return super().learn(
+            total_timesteps=total_timesteps,
+            callback=callback,
+            log_interval=log_interval,
+            tb_log_name=tb_log_name,
+            reset_num_timesteps=reset_num_timesteps,
+            progress_bar=progress_bar,
+        )
+
+    def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
+        return ["policy", "policy.optimizer", "policy.value_optimizer"], []

@@ -1,0 +1,338 @@
+from collections.abc import Sequence
+from typing import Any, ClassVar, TypeVar
+
+import numpy as np
+import torch as th
+import torch.nn.functional as F
+from gymnasium import spaces
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor
+
+from sb3_classic.common.buffers import TrainingBatch, select
+from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
+from sb3_classic.common.returns import epsilon_greedy_expectation, nstep_targets
+from sb3_classic.common.schedules import ExponentialDecay
+from sb3_classic.common.utils import check_choice, check_positive_int, check_range
+from sb3_classic.sarsa.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, SARSAPolicy
+
+SelfNStepSARSA = TypeVar("SelfNStepSARSA", bound="NStepSARSA")
+
+
+class NStepSARSA(ClassicOnPolicyAlgorithm):
+    """
+    Episodic semi-gradient n-step SARSA (Sutton & Barto, Reinforcement Learning: An Introduction, 2nd ed., §10.2)
+    with a neural network q̂(s, a, w) and an ε-greedy behaviour policy.
+
+    Each transition (S_t, A_t) is trained once towards its n-step return
+    G_{t:t+n} = R_{t+1} + γR_{t+2} + … + γ^{n−1}R_{t+n} + γ^n q̂(S_{t+n}, A_{t+n}) (eq. 10.4), where A_{t+n} is the
+    action the agent actually took, with no bootstrap past a termination: w ← w + α[G_{t:t+n} − q̂(S_t, A_t, w)]
+    ∇q̂(S_t, A_t, w) (eq. 10.5). The gradient does not flow through the target (semi-gradient).
+
+    Updates are batched: every ``train_freq`` steps per env, one gradient step (or ``gradient_steps``) on the mean
+    loss of every transition whose target has become known. A transition whose n steps are not all taken yet waits
+    for a later update, so every target is a full n-step return, whatever ``train_freq`` is; ``train_freq=1`` with one
+    env and ``learning_rate`` used by SGD is the book's per-step algorithm.
+
+    At a time-limit truncation the target bootstraps from the final state with the expectation of q̂ under the
+    current ε-greedy policy, (1 − ε) max_a q̂ + ε mean_a q̂: no action is taken there, and the expectation is the
+    lower-variance estimate of the value of the one the policy would take. With ``expected_sarsa=True``, every
+    bootstrap uses that expectation (n-step Expected SARSA, eq. 7.7–7.8).
+
+    :param policy: the policy model to use (``"MlpPolicy"``, ``"CnnPolicy"``, ``"MultiInputPolicy"``)
+    :param env: the environment to learn from (if registered in Gymnasium, can be str)
+    :param learning_rate: learning rate α (a float or an SB3 schedule of the remaining progress)
+    :param n_steps: the n of n-step returns (as DQN's ``n_steps``); the seed report's best: 10 on CartPole-v1,
+        5 on Acrobot-v1
+    :param train_freq: env steps per env between two updates
+    :param gradient_steps: gradient steps per update, on the same batch and targets
+    :param gamma: discount factor γ
+    :param expected_sarsa: bootstrap from the ε-greedy expectation of q̂ instead of q̂ of the action taken
+    :param exploration_schedule: ``"exponential"``: ε ← max(ε_final, ε · ``exploration_decay_rate``) at the end of
+        every episode (the seed report's); ``"linear"``: from initial to final over ``exploration_fraction`` of
+        each ``learn()`` call (SB3's DQN)
+    :param exploration_initial_eps: initial ε
+    :param exploration_final_eps: final ε (the floor of the exponential decay)
+    :param exploration_fraction: fraction of training over which the linear decay runs
+    :param exploration_decay_rate: per-episode factor of the exponential decay
+    :param loss_function: ``"mse"`` (½(G − q̂)², the book's update) or ``"huber"`` (the same within 1 of the target,
+        linear beyond)
+    :param max_grad_norm: clip the gradient norm to this; None for no clipping
+    :param lr_decay_factor: multiply the learning rate by this at each decay (1.0: no decay)
+    :param lr_decay_every: decay every this many ``lr_decay_unit`` (like PyTorch's ``StepLR``)
+    :param lr_decay_milestones: decay when the count of ``lr_decay_unit`` reaches each of these (like ``MultiStepLR``;
+        the seed report's Acrobot setting decays at 300 and 500 episodes)
+    :param lr_decay_unit: ``"episode"`` (completed episodes) or ``"update"`` (gradient updates)
+    :param handle_timeout_termination: at a time-limit truncation, bootstrap from the final state (the time limit is
+        not part of the task: SB3's choice, and the default); if False, the return ends there as at a termination
+    :param stats_window_size: window size for the rollout logging, in episodes
+    :param tensorboard_log: the log location for TensorBoard (if None, no logging)
+    :param policy_kwargs: additional arguments to be passed to the policy on creation (see ``SARSAPolicy``:
+        ``net_arch``, ``activation_fn``, ``activation_kwargs``, ``weight_init``, ...)
+    :param verbose: verbosity level: 0 no output, 1 info, 2 debug
+    :param seed: seed for the pseudo random generators
+    :param device: device (cpu, cuda, ...) on which the code should be run
+    :param _init_setup_model: whether or not to build the network at the creation of the instance
+    """
+
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {
+        "MlpPolicy": MlpPolicy,
+        "CnnPolicy": CnnPolicy,
+        "MultiInputPolicy": MultiInputPolicy,
+    }
+    policy: SARSAPolicy
+    action_space: spaces.Discrete
+    exploration_schedule_fn: ExponentialDecay | LinearSchedule
+
+    def __init__(
+        self,
+        policy: str | type[SARSAPolicy],
+        env: GymEnv | str,
+        learning_rate: float | Schedule = 5e-4,
+        n_steps: int = 5,
+        train_freq: int = 16,
+        gradient_steps: int = 1,
+        gamma: float = 0.99,
+        expected_sarsa: bool = False,
+        exploration_schedule: str = "exponential",
+        exploration_initial_eps: float = 1.0,
+        exploration_final_eps: float = 0.01,
+        exploration_fraction: float = 0.1,
+        exploration_decay_rate: float = 0.99,
+        loss_function: str = "mse",
+        max_grad_norm: float | None = None,
+        lr_decay_factor: float = 1.0,
+        lr_decay_every: int | None = None,
+        lr_decay_milestones: Sequence[int] | None = None,
+        lr_decay_unit: str = "episode",
+        handle_timeout_termination: bool = True,
+        stats_window_size: int = 100,
+        tensorboard_log: str | None = None,
+        policy_kwargs: dict[str, Any] | None = None,
+        verbose: int = 0,
+        seed: int | None = None,
+        device: th.device | str = "auto",
+        _init_setup_model: bool = True,
+    ):
+        super().__init__(
+            policy,
+            env,
+            learning_rate=learning_rate,
+            n_steps=n_steps,
+            gamma=gamma,
+            max_grad_norm=max_grad_norm,
+            lr_decay_factor=lr_decay_factor,
+            lr_decay_every=lr_decay_every,
+            lr_decay_milestones=lr_decay_milestones,
+            lr_decay_unit=lr_decay_unit,
+            handle_timeout_termination=handle_timeout_termination,
+            # SARSA holds at most n_steps + train_freq steps per env, however long the episodes
+            max_episode_length=None,
+            stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log,
+            policy_kwargs=policy_kwargs,
+            verbose=verbose,
+            seed=seed,
+            device=device,
+            supported_action_spaces=(spaces.Discrete,),
+            _init_setup_model=False,
+        )
+        self.train_freq = train_freq
+        self.gradient_steps = gradient_steps
+        self.expected_sarsa = expected_sarsa
+        self.exploration_schedule = exploration_schedule
+        self.exploration_initial_eps = exploration_initial_eps
+        self.exploration_final_eps = exploration_final_eps
+        self.exploration_fraction = exploration_fraction
+        self.exploration_decay_rate = exploration_decay_rate
+        self.loss_function = loss_function
+        # ε of the ε-greedy behaviour policy (SB3's DQN name); follows exploration_schedule
+        self.exploration_rate = exploration_initial_eps
+        if _init_setup_model:
+            self._setup_model()
+
+    def _unsupported_action_space_message(self, supported: tuple[type[spaces.Space], ...]) -> str:
+        return (
+            f"NStepSARSA needs a Discrete action space (q̂ has one output per action), not {self.action_space}: "
+            "use REINFORCE for Box, MultiDiscrete or MultiBinary actions, or wrap the env to discretize its actions"
+        )
+
+    def _check_arguments(self) -> None:
+        super()._check_arguments()
+        check_positive_int("n_steps", self.n_steps, hint="n=1 is one-step SARSA; the seed report used 5 and 10")
+        check_positive_int("train_freq", self.train_freq)
+        check_positive_int("gradient_steps", self.gradient_steps)
+        check_choice("exploration_schedule", self.exploration_schedule, ("exponential", "linear"))
+        check_range("exploration_initial_eps", self.exploration_initial_eps, 0.0, 1.0)
+        check_range("exploration_final_eps", self.exploration_final_eps, 0.0, 1.0)
+        check_range("exploration_fraction", self.exploration_fraction, 0.0, 1.0, low_open=True)
+        check_range("exploration_decay_rate", self.exploration_decay_rate, 0.0, 1.0, low_open=True)
+        check_choice("loss_function", self.loss_function, ("mse", "huber"))
+
+    def _initial_buffer_size(self) -> int:
+        # At most n_steps transitions per env wait for their targets between updates
+        return self.n_steps + self.train_freq
+
+    def _setup_model(self) -> None:
+        super()._setup_model()
+        if self.exploration_schedule == "exponential":
+            self.exploration_schedule_fn = ExponentialDecay(
+                self.exploration_initial_eps, self.exploration_final_eps, self.exploration_decay_rate
+            )
+        else:
+            self.exploration_schedule_fn = LinearSchedule(
+                self.exploration_initial_eps, self.exploration_final_eps, self.exploration_fraction
+            )
+        self._update_exploration_rate()
+
+    def _make_policy(self) -> BasePolicy:
+        return self.policy_class(self.observation_space, self.action_space, self.lr_schedule, **self.policy_kwargs)
+
+    def _update_exploration_rate(self) -> None:
+        if isinstance(self.exploration_schedule_fn, ExponentialDecay):
+            self.exploration_rate = self.exploration_schedule_fn(self._completed_episodes)
+        else:
+            self.exploration_rate = self.exploration_schedule_fn(self._current_progress_remaining)
+
+    def _on_episodes_end(self, n_episodes: int) -> None:
+        super()._on_episodes_end(n_episodes)
+        self._update_exploration_rate()
+
+    def _epsilon_greedy(self, greedy_actions: np.ndarray) -> np.ndarray:
+        # With probability ε, an action drawn uniformly from all actions (S&B §2.2), for each env independently
+        explore = np.random.random(greedy_actions.shape) < self.exploration_rate
+        if not explore.any():
+            return greedy_actions
+        return np.where(explore, np.random.randint(self.action_space.n, size=greedy_actions.shape), greedy_actions)
+
+    def _sample_actions(self, obs: th.Tensor | dict[str, th.Tensor]) -> np.ndarray:
+        return self._epsilon_greedy(self.policy.q_net(obs).argmax(dim=1).cpu().numpy())
+
+    def _rollout_complete(self, n_steps: int, n_episodes: int) -> bool:
+        return n_steps >= self.train_freq
+
+    def predict(
+        self,
+        observation: np.ndarray | dict[str, np.ndarray],
+        state: tuple[np.ndarray, ...] | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = False,
+    ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
+        """
+        The greedy action (``deterministic=True``), or the ε-greedy one with the current ``exploration_rate``.
+
+        :param observation: the input observation (one, or a batch)
+        :param state: unused (no recurrent policy)
+        :param episode_start: unused (no recurrent policy)
+        :param deterministic: greedy if True, ε-greedy otherwise
+        :return: the actions, and the unchanged state
+        """
+        actions, state = self.policy.predict(observation, state, episode_start, deterministic=True)
+        return (actions if deterministic else self._epsilon_greedy(actions)), state
+
+    def _bootstrap_values(self, q_values: th.Tensor) -> np.ndarray:
+        """
+        :param q_values: q̂(S, ·) of states to bootstrap from, shape (..., n_actions), detached
+        :return: the ε-greedy expectation Σ_a π(a|S) q̂(S, a) (S&B eq. 7.8)
+        """
+        return epsilon_greedy_expectation(q_values.cpu().numpy(), self.exploration_rate)
+
+    def _training_batch(self) -> TrainingBatch | None:
+        """
+        :return: every transition not trained on yet whose n-step target G_{t:t+n} is known, with that target
+            (None if there is none yet)
+        """
+        data = self.rollout_buffer.get()
+        n_rows, n_envs = data.rewards.shape
+        observations = obs_as_tensor(select(data.observations, np.ones((n_rows, n_envs), dtype=bool)), self.device)
+        actions = th.as_tensor(data.actions.reshape(-1, 1), device=self.device)
+        # Semi-gradient: the targets come from the current weights, without gradient
+        with th.no_grad():
+            q_values = self.policy.q_net(observations)
+            if self.expected_sarsa:
+                state_values = self._bootstrap_values(q_values).reshape(n_rows, n_envs)
+            else:
+                state_values = q_values.gather(1, actions).reshape(n_rows, n_envs).cpu().numpy()
+            # Bootstrap after step t from step t+1: q̂(S_{t+1}, A_{t+1}), or its ε-greedy expectation
+            next_values = np.zeros_like(data.rewards)
+            next_values[:-1] = state_values[1:]
+            # No bootstrap past a termination; a truncation bootstraps from its final state
+            next_values[data.dones] = 0.0
+            if data.truncated.any():
+                final_obs = obs_as_tensor(select(data.final_observations, data.truncated), self.device)
+                next_values[data.truncated] = self._bootstrap_values(self.policy.q_net(final_obs))
+        # G_{t:t+n} (S&B eq. 10.4)
+        targets, complete = nstep_targets(data.rewards, data.dones, next_values, self.gamma, self.n_steps)
+        trained = complete & data.pending
+        if not trained.any():
+            return None
+        flat_trained = th.as_tensor(trained.reshape(-1), device=self.device)
+        return TrainingBatch(
+            observations=select(observations, flat_trained),  # type: ignore[arg-type]
+            actions=actions[flat_trained],
+            targets=th.as_tensor(targets[trained], device=self.device),
+            episode_steps=th.as_tensor(data.episode_steps[trained], device=self.device),
+            trained=trained,
+        )
+
+    def train(self) -> None:
+        """Update q̂ towards the n-step targets of every transition whose target is known and not trained on yet."""
+        self.policy.set_training_mode(True)
+        self._update_learning_rates([(self.policy.optimizer, self.lr_schedule, "train/learning_rate")])
+        self._update_exploration_rate()
+        self.logger.record("rollout/exploration_rate", self.exploration_rate)
+        batch = self._training_batch()
+        if batch is None:
+            return
+
+        for gradient_step in range(self.gradient_steps):
+            q_predicted = self.policy.q_net(batch.observations).gather(1, batch.actions).flatten()
+            if gradient_step == 0:
+                q_mean = q_predicted.mean().item()
+            # w ← w + α [G_{t:t+n} − q̂(S_t, A_t, w)] ∇q̂(S_t, A_t, w) (S&B eq. 10.5): the gradient of ½(G − q̂)²
+            if self.loss_function == "mse":
+                loss = 0.5 * F.mse_loss(q_predicted, batch.targets)
+            else:
+                loss = F.smooth_l1_loss(q_predicted, batch.targets)
+            self.policy.optimizer.zero_grad()
+            loss.backward()
+            self._clip_gradients(self.policy.q_net.parameters())
+            self.policy.optimizer.step()
+
+        self.rollout_buffer.mark_trained(batch.trained)
+        self._n_updates += self.gradient_steps
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        self.logger.record("train/loss", loss.item())
+        self.logger.record("train/q_mean", q_mean)
+        self.logger.record("train/target_mean", batch.targets.mean().item())
+        self.logger.record("train/n_transitions", len(batch.targets))
+
+    def learn(
+        self: SelfNStepSARSA,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 100,
+        tb_log_name: str = "NStepSARSA",
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfNStepSARSA:
+        """
+        Train for ``total_timesteps`` env steps (rounded up to whole rollouts).
+
+        :param total_timesteps: env steps to train for, all envs together
+        :param callback: callback(s) called at every step with the state of the algorithm
+        :param log_interval: updates between two logger dumps
+        :param tb_log_name: the name of the run for TensorBoard logging
+        :param reset_num_timesteps: whether to reset ``num_timesteps`` (and the envs); the exponential ε decay and the
+            learning-rate decay counts keep going either way, a linear ε decay restarts (as SB3's DQN)
+        :param progress_bar: display a progress bar using tqdm and rich
+        :return: the trained model
+        """
+        return super().learn(
+            total_timesteps=total_timesteps,
+            callback=callback,
+            log_interval=log_interval,
+            tb_log_name=tb_log_name,
+            reset_num_timesteps=reset_num_timesteps,
+            progress_bar=progress_bar,
+        )

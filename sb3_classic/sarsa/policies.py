@@ -1,0 +1,168 @@
+"""Q-network policies of n-step SARSA: q̂(s, ·, w), one output per action."""
+
+from typing import Any
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, CombinedExtractor, FlattenExtractor, NatureCNN
+from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
+from stable_baselines3.dqn.policies import QNetwork
+from torch import nn
+
+from sb3_classic.common.torch_layers import check_weight_init, kaiming_init, make_activation
+
+
+class SARSAPolicy(BasePolicy):
+    """
+    The action-value network q̂(s, a, w) of semi-gradient SARSA (Sutton & Barto §10.1–10.2), with its optimizer.
+    It is SB3's DQN ``QNetwork`` without a target network: SARSA bootstraps from the online network.
+    ``predict`` is greedy; the ε-greedy behaviour policy lives in ``NStepSARSA``, as ε is training state.
+
+    :param observation_space: observation space
+    :param action_space: action space (Discrete)
+    :param lr_schedule: learning-rate schedule (could be constant)
+    :param net_arch: hidden layer sizes, e.g. ``[128, 128]``
+    :param activation_fn: activation class of the hidden layers
+    :param activation_kwargs: arguments of ``activation_fn``, e.g. ``dict(negative_slope=0.1)`` for ``nn.LeakyReLU``
+    :param weight_init: ``"kaiming"`` (He initialisation of the hidden layers, the seed report's choice; the output
+        layer keeps PyTorch's default), ``"orthogonal"`` (SB3's A2C/PPO scheme: gain √2 hidden, 1 output) or
+        ``"default"`` (PyTorch's default everywhere, as SB3's DQN)
+    :param features_extractor_class: features extractor to use
+    :param features_extractor_kwargs: keyword arguments to pass to the features extractor
+    :param normalize_images: whether to divide images by 255
+    :param optimizer_class: the optimizer to use, ``th.optim.Adam`` by default
+    :param optimizer_kwargs: additional keyword arguments, excluding the learning rate, to pass to the optimizer
+    """
+
+    action_space: spaces.Discrete
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Discrete,
+        lr_schedule: Schedule,
+        net_arch: list[int] | None = None,
+        activation_fn: type[nn.Module] = nn.ReLU,
+        activation_kwargs: dict[str, Any] | None = None,
+        weight_init: str = "kaiming",
+        features_extractor_class: type[BaseFeaturesExtractor] = FlattenExtractor,
+        features_extractor_kwargs: dict[str, Any] | None = None,
+        normalize_images: bool = True,
+        optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
+        optimizer_kwargs: dict[str, Any] | None = None,
+    ) -> None:
+        check_weight_init(weight_init)
+        super().__init__(
+            observation_space,
+            action_space,
+            features_extractor_class,
+            features_extractor_kwargs,
+            optimizer_class=optimizer_class,
+            optimizer_kwargs=optimizer_kwargs,
+            normalize_images=normalize_images,
+        )
+        if net_arch is None:
+            net_arch = [] if features_extractor_class == NatureCNN else [64, 64]
+        self.net_arch = net_arch
+        self.activation_fn = activation_fn
+        self.activation_kwargs = activation_kwargs
+        self.weight_init = weight_init
+
+        features_extractor = self.make_features_extractor()
+        self.q_net = QNetwork(
+            self.observation_space,
+            self.action_space,
+            features_extractor=features_extractor,
+            features_dim=features_extractor.features_dim,
+            net_arch=self.net_arch,
+            activation_fn=make_activation(activation_fn, activation_kwargs),
+            normalize_images=normalize_images,
+        )
+        layers = list(self.q_net.q_net)
+        hidden, output = [features_extractor, *layers[:-1]], layers[-1]
+        if weight_init == "kaiming":
+            kaiming_init(hidden, activation_fn, activation_kwargs)
+        elif weight_init == "orthogonal":
+            for module in hidden:
+                module.apply(lambda layer: self.init_weights(layer, gain=np.sqrt(2)))
+            output.apply(lambda layer: self.init_weights(layer, gain=1.0))
+        self.optimizer = self.optimizer_class(self.q_net.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)  # type: ignore[call-arg]
+
+    def forward(self, obs: PyTorchObs, deterministic: bool = True) -> th.Tensor:
+        """:return: the greedy actions argmax_a q̂(obs, a)"""
+        return self._predict(obs, deterministic=deterministic)
+
+    def _predict(self, observation: PyTorchObs, deterministic: bool = True) -> th.Tensor:
+        return self.q_net._predict(observation, deterministic=deterministic)
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        data = super()._get_constructor_parameters()
+        data.update(
+            net_arch=self.net_arch,
+            activation_fn=self.activation_fn,
+            activation_kwargs=self.activation_kwargs,
+            weight_init=self.weight_init,
+            lr_schedule=self._dummy_schedule,  # not needed to load the policy alone
+            optimizer_class=self.optimizer_class,
+            optimizer_kwargs=self.optimizer_kwargs,
+            features_extractor_class=self.features_extractor_class,
+            features_extractor_kwargs=self.features_extractor_kwargs,
+        )
+        return data
+
+    def set_training_mode(self, mode: bool) -> None:
+        self.q_net.set_training_mode(mode)
+        self.training = mode
+
+
+class SARSACnnPolicy(SARSAPolicy):
+    """
+    ``SARSAPolicy`` with SB3's NatureCNN features extractor, for image observations.
+
+    :param observation_space: observation space
+    :param action_space: action space (Discrete)
+    :param lr_schedule: learning-rate schedule (could be constant)
+    :param kwargs: the other arguments of ``SARSAPolicy``
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Discrete,
+        lr_schedule: Schedule,
+        features_extractor_class: type[BaseFeaturesExtractor] = NatureCNN,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(
+            observation_space, action_space, lr_schedule, features_extractor_class=features_extractor_class, **kwargs
+        )
+
+
+class SARSAMultiInputPolicy(SARSAPolicy):
+    """
+    ``SARSAPolicy`` with SB3's CombinedExtractor, for ``Dict`` observations.
+
+    :param observation_space: observation space
+    :param action_space: action space (Discrete)
+    :param lr_schedule: learning-rate schedule (could be constant)
+    :param kwargs: the other arguments of ``SARSAPolicy``
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Discrete,
+        lr_schedule: Schedule,
+        features_extractor_class: type[BaseFeaturesExtractor] = CombinedExtractor,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(
+            observation_space, action_space, lr_schedule, features_extractor_class=features_extractor_class, **kwargs
+        )
+
+
+MlpPolicy = SARSAPolicy
+CnnPolicy = SARSACnnPolicy
+MultiInputPolicy = SARSAMultiInputPolicy

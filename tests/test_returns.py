@@ -1,0 +1,66 @@
+"""The return and target math against slow, obvious transcriptions of the book, on random trajectories."""
+
+import numpy as np
+import pytest
+from reference import bootstrap_values, random_trajectories, reference_mc_returns, reference_nstep_targets
+
+from sb3_classic.common.returns import discounted_returns, epsilon_greedy_expectation, nstep_targets
+
+
+@pytest.mark.parametrize("seed", range(20))
+@pytest.mark.parametrize("gamma", [0.9, 1.0])
+def test_discounted_returns_match_reference(seed: int, gamma: float) -> None:
+    rng = np.random.default_rng(seed)
+    traj = random_trajectories(rng, n_steps=int(rng.integers(1, 40)), n_envs=3)
+    next_values = np.where(traj["truncated"], traj["final_values"], 0.0)
+    returns = discounted_returns(traj["rewards"], traj["dones"], next_values, gamma)
+    n_checked = 0
+    for env in range(3):
+        for t, expected in reference_mc_returns(traj, env, gamma).items():
+            assert returns[t, env] == pytest.approx(expected, rel=1e-4, abs=1e-4)
+            n_checked += 1
+    assert n_checked == sum(end + 1 for end in np.where(traj["dones"], np.arange(len(traj["dones"]))[:, None], -1).max(0))
+
+
+def test_discounted_returns_by_hand() -> None:
+    # One env: an episode terminated after 3 rewards, then one truncated after 2 with v̂(S_final) = 10
+    rewards = np.array([[1.0], [2.0], [3.0], [4.0], [5.0]])
+    dones = np.array([[False], [False], [True], [False], [True]])
+    next_values = np.array([[0.0], [0.0], [0.0], [0.0], [10.0]])
+    returns = discounted_returns(rewards, dones, next_values, gamma=0.5)
+    np.testing.assert_allclose(returns[:, 0], [1 + 0.5 * 2 + 0.25 * 3, 2 + 0.5 * 3, 3, 4 + 0.5 * 5 + 0.25 * 10, 5 + 0.5 * 10])
+
+
+@pytest.mark.parametrize("seed", range(30))
+@pytest.mark.parametrize("n", [1, 2, 5, 50])
+def test_nstep_targets_match_reference(seed: int, n: int) -> None:
+    rng = np.random.default_rng(seed)
+    # Rollouts shorter and longer than n, several envs, random terminations and truncations
+    traj = random_trajectories(rng, n_steps=int(rng.integers(1, 30)), n_envs=3, p_end=float(rng.choice([0.0, 0.1, 0.4])))
+    gamma = float(rng.choice([0.9, 1.0]))
+    targets, complete = nstep_targets(traj["rewards"], traj["dones"], bootstrap_values(traj), gamma, n)
+    for env in range(3):
+        expected = reference_nstep_targets(traj, env, gamma, n)
+        # The same transitions are complete (no target shortened, none left out) ...
+        assert set(np.flatnonzero(complete[:, env])) == set(expected)
+        # ... with the same targets, never reading the unknown bootstrap after the last step
+        for t, target in expected.items():
+            assert targets[t, env] == pytest.approx(target, rel=1e-4, abs=1e-4)
+
+
+def test_nstep_targets_by_hand() -> None:
+    # n = 2, γ = 0.5, one env: a terminated episode of 3 steps, then a running one of 2 steps
+    rewards = np.array([[1.0], [2.0], [3.0], [4.0], [5.0]])
+    dones = np.array([[False], [False], [True], [False], [False]])
+    q_next = np.array([[7.0], [8.0], [0.0], [9.0], [np.nan]])  # q̂(S_{t+1}, A_{t+1}); 0 after the termination
+    targets, complete = nstep_targets(rewards, dones, q_next, gamma=0.5, n_steps=2)
+    # The last two need q̂(S_5, A_5): step 5 has not been taken
+    assert complete[:, 0].tolist() == [True, True, True, False, False]
+    np.testing.assert_allclose(targets[:3, 0], [1 + 0.5 * 2 + 0.25 * 8, 2 + 0.5 * 3, 3])
+
+
+@pytest.mark.parametrize("epsilon", [0.0, 0.1, 1.0])
+def test_epsilon_greedy_expectation(epsilon: float) -> None:
+    q = np.array([[1.0, 4.0, 2.0], [0.0, 0.0, 3.0]])
+    expected = [sum(q[i, a] * ((1 - epsilon) * (a == q[i].argmax()) + epsilon / 3) for a in range(3)) for i in range(2)]
+    np.testing.assert_allclose(epsilon_greedy_expectation(q, epsilon), expected)
