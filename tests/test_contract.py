@@ -63,10 +63,12 @@ def test_learn_and_predict(model_class: type[BaseAlgorithm]) -> None:
     obs = observations()
     for deterministic in (True, False):
         actions, state = model.predict(obs, deterministic=deterministic)
-        assert actions.shape == (len(obs),) and state is None
+        assert actions.shape == (len(obs),)
+        assert state is None
         assert all(model.action_space.contains(action) for action in actions)
         action, _ = model.predict(obs[0], deterministic=deterministic)
-        assert action.shape == () and model.action_space.contains(int(action))
+        assert action.shape == ()
+        assert model.action_space.contains(int(action))
     # Deterministic predictions are repeatable
     np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], model.predict(obs, deterministic=True)[0])
 
@@ -130,7 +132,8 @@ def test_get_and_set_parameters(model_class: type[BaseAlgorithm]) -> None:
 def test_set_env_and_load_with_another_number_of_envs(model_class: type[Any], tmp_path: Path) -> None:
     model = make_model(model_class, seed=0).learn(200)
     model.set_env(make_vec_env("CartPole-v1", n_envs=3, seed=1))
-    assert model.n_envs == 3 and model.rollout_buffer.n_envs == 3
+    assert model.n_envs == 3
+    assert model.rollout_buffer.n_envs == 3
     model.learn(300)
     with pytest.raises(ValueError, match="force_reset=True"):
         model.set_env(make_vec_env("CartPole-v1", n_envs=2), force_reset=False)
@@ -164,8 +167,10 @@ def test_callbacks(model_class: type[BaseAlgorithm], tmp_path: Path) -> None:
     )
     checkpoints = CheckpointCallback(save_freq=150, save_path=str(tmp_path / "checkpoints"))
     model = make_model(model_class, env=env, seed=0).learn(600, callback=[counting, eval_callback, checkpoints])
-    assert counting.steps == model.num_timesteps // 2 and counting.rollouts >= 1
-    assert (tmp_path / "evaluations.npz").exists() and len(np.load(tmp_path / "evaluations.npz")["results"]) >= 2
+    assert counting.steps == model.num_timesteps // 2
+    assert counting.rollouts >= 1
+    assert (tmp_path / "evaluations.npz").exists()
+    assert len(np.load(tmp_path / "evaluations.npz")["results"]) >= 2
     assert len(list((tmp_path / "checkpoints").glob("*.zip"))) >= 2
     # A callback returning False stops training at once
     stopped = make_model(model_class, env=env, seed=0).learn(10_000, callback=CountingCallback(stop_after=37))
@@ -254,8 +259,9 @@ def test_reinforce_learns_on_every_supported_action_space(space: str) -> None:
 
 @pytest.mark.parametrize("space", ["Box", "MultiDiscrete", "MultiBinary"])
 def test_sarsa_refuses_non_discrete_actions_at_construction(space: str) -> None:
+    env: Any = ACTION_SPACE_ENVS[space]()
     with pytest.raises(ValueError, match=r"NStepSARSA needs a Discrete action space.*use REINFORCE"):
-        NStepSARSA("MlpPolicy", ACTION_SPACE_ENVS[space]())
+        NStepSARSA("MlpPolicy", env)
 
 
 @pytest.mark.parametrize("model_class", MODEL_LIST)
@@ -273,7 +279,7 @@ def test_image_and_dict_observations(model_class: type[Any], policy: str, env: A
     assert model._n_updates > 0
     model.save(tmp_path / "model.zip")
     loaded = model_class.load(tmp_path / "model.zip", device="cpu")
-    obs = vec_env.reset()
+    obs: Any = vec_env.reset()
     np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0])
 
 
