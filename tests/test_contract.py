@@ -1,6 +1,7 @@
 """The Stable-Baselines3 contract, for every algorithm of the package (as sb3-contrib's test_run/test_save_load)."""
 
 import glob
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -239,7 +240,7 @@ def test_vec_normalize(model_class: type[BaseAlgorithm]) -> None:
     assert model.get_vec_normalize_env() is env
 
 
-ACTION_SPACE_ENVS = {
+ACTION_SPACE_ENVS: dict[str, Callable[[], gym.Env]] = {
     "Discrete": lambda: IdentityEnv(dim=3, ep_length=20),
     "Box": lambda: IdentityEnvBox(ep_length=20),
     "MultiDiscrete": lambda: IdentityEnvMultiDiscrete(dim=3, ep_length=20),
@@ -251,8 +252,7 @@ ACTION_SPACE_ENVS = {
 def test_reinforce_learns_on_every_supported_action_space(space: str) -> None:
     env = make_vec_env(ACTION_SPACE_ENVS[space], n_envs=2, seed=0)
     model = REINFORCE("MlpPolicy", env, policy_kwargs=dict(net_arch=[16]), seed=0, device="cpu").learn(400)
-    obs = env.reset()
-    actions, _ = model.predict(obs, deterministic=False)
+    actions, _ = model.predict(env.reset(), deterministic=False)  # type: ignore[arg-type]
     assert all(model.action_space.contains(action) for action in actions)
     assert model._n_updates > 0
 
