@@ -1,0 +1,167 @@
+"""What the benchmarks run: the envs, the algorithms and their hyperparameters, and the cache key of a run."""
+
+import hashlib
+import importlib
+import json
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import gymnasium
+import numpy as np
+import rl_zoo3
+import stable_baselines3
+import torch as th
+import yaml
+
+import sb3_classic
+
+ENV_IDS = ("CartPole-v1", "Acrobot-v1")
+#: The reward threshold an evaluation's mean return must reach (Gymnasium's ``reward_threshold`` for CartPole-v1;
+#: the customary one for Acrobot-v1, whose spec has ``reward_threshold=-100.0``)
+THRESHOLDS = {"CartPole-v1": 475.0, "Acrobot-v1": -100.0}
+OUR_ALGOS = ("reinforce", "nstep_sarsa")
+PEER_ALGOS = ("a2c", "ppo", "dqn")
+ALL_ALGOS = OUR_ALGOS + PEER_ALGOS
+LABELS = {"reinforce": "REINFORCE", "nstep_sarsa": "NStepSARSA", "a2c": "A2C", "ppo": "PPO", "dqn": "DQN"}
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+#: The package's hyperparameters (rl-zoo3 format), at the repository root
+OUR_HYPERPARAMS_DIR = REPO_ROOT / "hyperparams"
+#: rl-zoo3's tuned hyperparameters, inside the installed package
+ZOO_HYPERPARAMS_DIR = Path(rl_zoo3.__file__).resolve().parent / "hyperparams"
+DEFAULT_CACHE_DIR = REPO_ROOT / "benchmarks" / "cache"
+DEFAULT_RESULTS_DIR = REPO_ROOT / "benchmarks" / "results"
+#: Where ``--quick`` writes its tables and plots: scratch, git-ignored with the cache
+QUICK_RESULTS_DIR = DEFAULT_CACHE_DIR / "quick-results"
+
+
+def register_algorithms() -> None:
+    """Put ``reinforce`` and ``nstep_sarsa`` into ``rl_zoo3.ALGOS``, so that the zoo's ExperimentManager builds them."""
+    try:
+        zoo = importlib.import_module("sb3_classic.zoo")
+    except ModuleNotFoundError as error:
+        if error.name != "sb3_classic.zoo":
+            raise
+        # Until sb3_classic.zoo.register() lands, the two entries it adds:
+        rl_zoo3.ALGOS["reinforce"] = sb3_classic.REINFORCE
+        rl_zoo3.ALGOS["nstep_sarsa"] = sb3_classic.NStepSARSA
+    else:
+        zoo.register()
+
+
+def hyperparams_path(algo: str) -> Path:
+    """:return: the YAML the benchmark reads ``algo``'s hyperparameters from"""
+    if algo in OUR_ALGOS:
+        return OUR_HYPERPARAMS_DIR / f"{algo}.yml"
+    if algo in PEER_ALGOS:
+        return ZOO_HYPERPARAMS_DIR / f"{algo}.yml"
+    raise ValueError(f"algo={algo!r} is not benchmarked: choose one of {ALL_ALGOS}")
+
+
+def load_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
+    """
+    The hyperparameters of ``algo`` on ``env_id`` as the zoo reads them (the env's entry, else ``default``),
+    before its preprocessing.
+
+    :param algo: a key of ``LABELS``
+    :param env_id: a Gymnasium env id
+    :return: the YAML entry, as loaded
+    """
+    path = hyperparams_path(algo)
+    entries = yaml.safe_load(path.read_text())
+    if env_id in entries:
+        return dict(entries[env_id])
+    if "default" in entries:
+        return dict(entries["default"])
+    raise ValueError(f"{path} has no entry for {env_id} and no 'default' entry: add one")
+
+
+@cache
+def code_versions(algo: str) -> dict[str, str]:
+    """
+    The versions of everything a run's result depends on besides its settings: the libraries, and for our
+    algorithms a digest of the package's sources (they change between releases while being tuned).
+
+    :param algo: the algorithm
+    :return: name → version
+    """
+    versions = {
+        "stable_baselines3": stable_baselines3.__version__,
+        "rl_zoo3": rl_zoo3.__version__,
+        "gymnasium": gymnasium.__version__,
+        "torch": th.__version__,
+        "numpy": np.__version__,
+    }
+    if algo in OUR_ALGOS:
+        package = Path(sb3_classic.__file__).resolve().parent
+        digest = hashlib.sha256()
+        for source in sorted(package.rglob("*.py")):
+            digest.update(source.relative_to(package).as_posix().encode())
+            digest.update(source.read_bytes())
+        versions["sb3_classic"] = f"{sb3_classic.__version__}+{digest.hexdigest()[:12]}"
+    return versions
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """
+    One learning run: an algorithm on an env with one seed, for a step budget, evaluated periodically.
+
+    :param algo: the algorithm (a key of ``LABELS``)
+    :param env_id: the Gymnasium env id
+    :param seed: the seed of the model and the envs
+    :param n_timesteps: the step budget (env steps, all envs together)
+    :param eval_freq: env steps between two evaluations
+    :param n_eval_episodes: episodes per evaluation
+    :param hyperparams_yaml: the zoo YAML entry used, as text (read once, so a YAML edited during a benchmark
+        cannot make a run differ from its key)
+    """
+
+    algo: str
+    env_id: str
+    seed: int
+    n_timesteps: int
+    eval_freq: int
+    n_eval_episodes: int
+    hyperparams_yaml: str
+
+    @classmethod
+    def create(cls, algo: str, env_id: str, seed: int, n_timesteps: int, eval_freq: int, n_eval_episodes: int) -> "RunSpec":
+        """
+        :return: the run, with the hyperparameters read now from ``hyperparams_path(algo)``
+        """
+        hyperparams = yaml.safe_dump(load_hyperparams(algo, env_id), sort_keys=True)
+        return cls(algo, env_id, seed, n_timesteps, eval_freq, n_eval_episodes, hyperparams)
+
+    @property
+    def hyperparams(self) -> dict[str, Any]:
+        """The zoo YAML entry the run uses."""
+        return yaml.safe_load(self.hyperparams_yaml)
+
+    def key(self) -> str:
+        """
+        :return: a digest of everything that changes the result of the run and is not in its path: the
+            hyperparameters, the evaluation settings and the code versions
+        """
+        content = {
+            "algo": self.algo,
+            "env_id": self.env_id,
+            "seed": self.seed,
+            "n_timesteps": self.n_timesteps,
+            "eval_freq": self.eval_freq,
+            "n_eval_episodes": self.n_eval_episodes,
+            "hyperparams": self.hyperparams,
+            "versions": code_versions(self.algo),
+        }
+        return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()[:16]
+
+    def run_dir(self, cache_dir: Path) -> Path:
+        """:return: where the finished run is cached: ``<env>/<algo>/seed_<k>/<budget>-<key>``"""
+        return cache_dir / self.env_id / self.algo / f"seed_{self.seed}" / f"{self.n_timesteps}-{self.key()}"
+
+    @property
+    def name(self) -> str:
+        """A short label for progress displays."""
+        return f"{LABELS[self.algo]} {self.env_id} seed {self.seed}"

@@ -1,0 +1,308 @@
+"""
+The benchmarks of issue 5, in one command: REINFORCE and NStepSARSA with the package's hyperparameters, and SB3's
+A2C, PPO and DQN with rl-zoo3's, on CartPole-v1 and Acrobot-v1 with the same step budget and seeds; then the tables
+and plots of benchmarks/results/; then the throughput of learn() against A2C's.
+
+    python -m benchmarks.run            # the committed results (hours on 2 cores)
+    python -m benchmarks.run --quick    # a smoke test of the whole pipeline (minutes), into benchmarks/cache/
+
+Finished runs are cached in benchmarks/cache/ and never run again: an interrupted benchmark resumes where it stopped.
+"""
+
+import argparse
+import multiprocessing
+import os
+import platform
+import queue
+import shlex
+import sys
+import time
+from collections.abc import Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TaskID, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from benchmarks.common import (
+    ALL_ALGOS,
+    DEFAULT_CACHE_DIR,
+    DEFAULT_RESULTS_DIR,
+    ENV_IDS,
+    LABELS,
+    OUR_ALGOS,
+    QUICK_RESULTS_DIR,
+    RunSpec,
+    code_versions,
+    hyperparams_path,
+)
+from benchmarks.report import load_results, markdown_table, summary_table, threshold_crossings, write_learning_report
+from benchmarks.runner import RUN_FILE, init_worker, run_in_worker
+from benchmarks.throughput import ThroughputSettings, run_throughput, throughput_header, write_throughput_report
+
+
+@dataclass
+class Settings:
+    """
+    What a benchmark runs.
+
+    :param seeds: seeds of our algorithms (0 to seeds − 1)
+    :param peer_seeds: seeds of A2C, PPO and DQN (0 to peer_seeds − 1: the first of ours)
+    :param budgets: env steps of every run, per env (the same for all algorithms)
+    :param eval_freq: env steps between two evaluations
+    :param eval_episodes: episodes per evaluation
+    :param throughput: the throughput benchmark's settings
+    """
+
+    seeds: int
+    peer_seeds: int
+    budgets: dict[str, int]
+    eval_freq: int
+    eval_episodes: int
+    throughput: ThroughputSettings = field(default_factory=ThroughputSettings)
+
+
+#: The committed results. 500k steps: as CartPole-v1 and Acrobot-v1 episodes last at most 500 steps, every run of
+#: ours has at least the 1000 episodes of the seed report; it is A2C's zoo budget on both envs, more than DQN's (50k,
+#: 100k) and PPO's on CartPole-v1 (100k), half PPO's on Acrobot-v1 (1M, which it does not need to reach −100).
+FULL = Settings(seeds=10, peer_seeds=5, budgets=dict.fromkeys(ENV_IDS, 500_000), eval_freq=5_000, eval_episodes=10)
+#: A smoke test of the pipeline
+QUICK = Settings(
+    seeds=2,
+    peer_seeds=2,
+    budgets=dict.fromkeys(ENV_IDS, 10_000),
+    eval_freq=1_000,
+    eval_episodes=5,
+    throughput=ThroughputSettings(steps=2_000, repeats=3),
+)
+
+
+def parse_budgets(values: Sequence[str], env_ids: Sequence[str], defaults: dict[str, int]) -> dict[str, int]:
+    """
+    :param values: ``ENV=STEPS`` (one env) or ``STEPS`` (every env); STEPS may be written ``5e5``
+    :param env_ids: the envs of the benchmark
+    :param defaults: the budgets of the envs not given
+    :return: the budget of each env
+    """
+    budgets = {env_id: defaults[env_id] for env_id in env_ids}
+    for value in values:
+        env_id, _, steps = value.rpartition("=")
+        if env_id and env_id not in env_ids:
+            raise ValueError(f"--budget {value!r}: {env_id!r} is not one of the envs benchmarked ({', '.join(env_ids)})")
+        if not steps.replace(".", "", 1).replace("e", "", 1).isdigit() or float(steps) < 1:
+            raise ValueError(f"--budget {value!r}: the budget must be a positive number of env steps, e.g. 500000 or 5e5")
+        for target in [env_id] if env_id else env_ids:
+            budgets[target] = int(float(steps))
+    return budgets
+
+
+def make_specs(settings: Settings, env_ids: Sequence[str], algos: Sequence[str]) -> list[RunSpec]:
+    """:return: every run of the benchmark, seed by seed (so an interrupted benchmark has whole seeds done)"""
+    specs = []
+    for seed in range(max(settings.seeds, settings.peer_seeds)):
+        for env_id in env_ids:
+            for algo in algos:
+                if seed < (settings.seeds if algo in OUR_ALGOS else settings.peer_seeds):
+                    budget = settings.budgets[env_id]
+                    specs.append(RunSpec.create(algo, env_id, seed, budget, settings.eval_freq, settings.eval_episodes))
+    return specs
+
+
+def run_pending(specs: Sequence[RunSpec], workers: int, cache_dir: Path, console: Console) -> list[RunSpec]:
+    """
+    Run ``specs`` in a pool of ``workers`` processes, showing the progress of each and of all.
+
+    :return: the runs that failed (their errors are printed, and they are not cached)
+    """
+    if not specs:
+        return []
+    failed = []
+    context = multiprocessing.get_context("spawn")
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
+    progress_queue = context.Queue()
+    with (
+        ProcessPoolExecutor(workers, mp_context=context, initializer=init_worker, initargs=(progress_queue,)) as pool,
+        Progress(*columns, console=console) as progress,
+    ):
+        overall = progress.add_task(f"{len(specs)} runs (env steps)", total=sum(spec.n_timesteps for spec in specs))
+        futures: dict[Future, RunSpec] = {pool.submit(run_in_worker, spec, cache_dir): spec for spec in specs}
+        by_name = {spec.name: spec for spec in specs}
+        tasks: dict[str, TaskID] = {}
+        steps = dict.fromkeys(by_name, 0)
+        finished: set[str] = set()
+
+        def show(name: str, num_timesteps: int) -> None:
+            completed = min(num_timesteps, by_name[name].n_timesteps)
+            progress.advance(overall, completed - steps[name])
+            steps[name] = completed
+            if name in finished:
+                progress.remove_task(tasks.pop(name))
+            elif name not in tasks:
+                tasks[name] = progress.add_task(name, total=by_name[name].n_timesteps, completed=completed)
+            else:
+                progress.update(tasks[name], completed=completed)
+
+        pending = set(futures)
+        try:
+            while pending:
+                done, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+                while True:
+                    try:
+                        name, num_timesteps = progress_queue.get_nowait()
+                    except queue.Empty:
+                        break
+                    if name not in finished:
+                        show(name, num_timesteps)
+                for future in done:
+                    spec = futures[future]
+                    finished.add(spec.name)
+                    if spec.name in tasks:
+                        show(spec.name, spec.n_timesteps)
+                    else:
+                        progress.advance(overall, spec.n_timesteps - steps[spec.name])
+                    error = future.exception()
+                    if error is None:
+                        progress.console.print(f"done: {spec.name}")
+                    else:
+                        failed.append(spec)
+                        progress.console.print(
+                            f"[red]failed: {spec.name}: {error!r}[/red] (see {spec.run_dir(cache_dir)}.partial)"
+                        )
+        except KeyboardInterrupt:
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+    return failed
+
+
+def learning_header(command: str, settings: Settings, env_ids: Sequence[str], algos: Sequence[str], workers: int) -> str:
+    """:return: the markdown above the learning tables: the command, the settings and how to read the columns"""
+    budgets = ", ".join(f"{env_id} {settings.budgets[env_id]:,}" for env_id in env_ids)
+    ours = [LABELS[algo] for algo in algos if algo in OUR_ALGOS]
+    peers = [LABELS[algo] for algo in algos if algo not in OUR_ALGOS]
+    versions = ", ".join(f"{name} {version}" for name, version in code_versions("reinforce").items())
+    return f"""# Learning benchmarks
+
+Produced by:
+
+```
+{command}
+```
+
+- Env steps per run (every algorithm): {budgets}.
+- Seeds 0–{settings.seeds - 1} for {", ".join(ours) or "–"}; 0–{settings.peer_seeds - 1} for {", ".join(peers) or "–"}.
+- Hyperparameters: `hyperparams/*.yml` for ours, rl-zoo3's tuned `a2c/ppo/dqn.yml` for the others (listed at the end),
+  built by rl-zoo3's `ExperimentManager` (its `n_envs`, `VecNormalize`, schedules). The zoo's progress-relative
+  settings (`lin_` schedules, DQN's `exploration_fraction`) span the budget above, as with `python -m rl_zoo3.train -n`.
+- Evaluation: {settings.eval_episodes} episodes, deterministic, on a separate env, every {settings.eval_freq:,} env steps
+  and at the end of training.
+- {workers} runs in parallel, torch 1 thread each, CPU ({platform.machine()}, {os.cpu_count()} cores).
+- Versions: {versions}.
+
+Columns: *Final eval return*: the mean return of the evaluation at the end of training, mean ± std over seeds.
+*Env steps / Episodes to threshold*: at the first evaluation whose mean return reaches the threshold (episodes: the
+training episodes ended by then), median (min–max) over the seeds that reached it. *Learn time*: wall-clock seconds of
+`learn()` without the evaluations; *Env steps/s*: env steps over that time, each algorithm with its own `n_envs` (the
+zoo's): the like-for-like speed comparison is `throughput.md`. Plots: `<env>-episodes.png`, the
+training return of each episode (the seed report's figure; mean ± std over seeds, up to the episode count every seed
+reached); `<env>-steps.png`, the evaluation return against env steps."""
+
+
+def hyperparams_section(specs: Sequence[RunSpec]) -> str:
+    """:return: markdown listing the zoo YAML entry each algorithm used on each env"""
+    entries: dict[str, dict[str, object]] = {}
+    for spec in specs:
+        entries.setdefault(spec.algo, {})[spec.env_id] = spec.hyperparams
+    blocks = [
+        f"### {LABELS[algo]} (`{hyperparams_path(algo).name}`)\n\n```yaml\n{yaml.safe_dump(envs, sort_keys=False)}```"
+        for algo, envs in entries.items()
+    ]
+    note = "The zoo YAML entries, as read when the command started (`n_timesteps` is replaced by the budget above)."
+    return "## Hyperparameters used\n\n" + note + "\n\n" + "\n\n".join(blocks)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """The command line (``python -m benchmarks.run --help``). :return: the exit status"""
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument(
+        "--quick", action="store_true", help="2 seeds, 10k steps, short throughput; results in the scratch folder"
+    )
+    parser.add_argument("--envs", nargs="+", choices=ENV_IDS, default=list(ENV_IDS), help="envs to benchmark")
+    parser.add_argument("--algos", nargs="+", choices=ALL_ALGOS, default=list(ALL_ALGOS), help="algorithms to benchmark")
+    parser.add_argument("--seeds", type=int, help=f"seeds of REINFORCE and NStepSARSA (default {FULL.seeds})")
+    parser.add_argument("--peer-seeds", type=int, help=f"seeds of A2C, PPO and DQN (default {FULL.peer_seeds})")
+    parser.add_argument(
+        "--budget",
+        nargs="+",
+        default=[],
+        metavar="[ENV=]STEPS",
+        help="env steps per run, for one env (CartPole-v1=3e5) or all (3e5); default 5e5 on both",
+    )
+    parser.add_argument("--eval-freq", type=int, help=f"env steps between two evaluations (default {FULL.eval_freq})")
+    parser.add_argument("--eval-episodes", type=int, help=f"episodes per evaluation (default {FULL.eval_episodes})")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="runs in parallel (default: the cores)")
+    parser.add_argument("--cache-dir", type=Path, default=DEFAULT_CACHE_DIR, help="where finished runs are kept")
+    parser.add_argument("--results-dir", type=Path, help=f"tables and plots (default {DEFAULT_RESULTS_DIR}; --quick: scratch)")
+    parser.add_argument("--skip-throughput", action="store_true", help="only the learning runs and their report")
+    parser.add_argument("--throughput-steps", type=int, help="env steps of each timed learn() (default 20,000)")
+    parser.add_argument("--throughput-repeats", type=int, help="timed learn() calls per algorithm and setting (default 5)")
+    args = parser.parse_args(argv)
+
+    base = QUICK if args.quick else FULL
+    settings = Settings(
+        seeds=base.seeds if args.seeds is None else args.seeds,
+        peer_seeds=base.peer_seeds if args.peer_seeds is None else args.peer_seeds,
+        budgets=parse_budgets(args.budget, args.envs, base.budgets),
+        eval_freq=args.eval_freq or base.eval_freq,
+        eval_episodes=args.eval_episodes or base.eval_episodes,
+        throughput=ThroughputSettings(
+            env_ids=tuple(args.envs),
+            steps=args.throughput_steps or base.throughput.steps,
+            repeats=args.throughput_repeats or base.throughput.repeats,
+        ),
+    )
+    results_dir = args.results_dir or (QUICK_RESULTS_DIR if args.quick else DEFAULT_RESULTS_DIR)
+    command = shlex.join(["python", "-m", "benchmarks.run", *(sys.argv[1:] if argv is None else argv)])
+    console = Console()
+
+    specs = make_specs(settings, args.envs, args.algos)
+    pending = [spec for spec in specs if not (spec.run_dir(args.cache_dir) / RUN_FILE).exists()]
+    console.print(f"{len(specs)} runs: {len(specs) - len(pending)} cached, {len(pending)} to run on {args.workers} workers")
+    start = time.perf_counter()
+    try:
+        failed = run_pending(pending, args.workers, args.cache_dir, console)
+    except KeyboardInterrupt:
+        console.print("Interrupted: the finished runs are cached; run the same command again to resume.")
+        return 130
+    learning_time = time.perf_counter() - start
+
+    results = load_results(specs, args.cache_dir)
+    header = learning_header(command, settings, args.envs, args.algos, args.workers)
+    path = write_learning_report(results, args.envs, args.algos, header, results_dir, footer=hyperparams_section(specs))
+    crossings = threshold_crossings(results)
+    for env_id in args.envs:
+        console.print(
+            f"\n{env_id}\n{markdown_table(summary_table(results, crossings, env_id, args.algos))}",
+            soft_wrap=True,
+            markup=False,
+        )
+    console.print(f"\nLearning runs: {learning_time:.0f} s; wrote {path}")
+
+    if not args.skip_throughput:
+        start = time.perf_counter()
+        measurements = run_throughput(settings.throughput, console)
+        path = write_throughput_report(measurements, throughput_header(command, settings.throughput), results_dir)
+        console.print(
+            f"\n{path.read_text()}\nThroughput: {time.perf_counter() - start:.0f} s; wrote {path}",
+            soft_wrap=True,
+            markup=False,
+        )
+    if failed:
+        console.print(f"[red]{len(failed)} runs failed: {', '.join(spec.name for spec in failed)}[/red]")
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

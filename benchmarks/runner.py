@@ -1,0 +1,274 @@
+"""One learning run, built and trained by rl-zoo3's ExperimentManager, evaluated periodically, cached on disk."""
+
+import argparse
+import json
+import platform
+import shutil
+import time
+from contextlib import redirect_stderr, redirect_stdout
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+import pandas as pd
+import torch as th
+import yaml
+from rl_zoo3.exp_manager import ExperimentManager
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
+from stable_baselines3.common.evaluation import evaluate_policy
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import sync_envs_normalization
+
+from benchmarks.common import RunSpec, code_versions, register_algorithms
+
+#: Files of a finished run (the run directory appears, complete, only when the run has finished)
+RUN_FILE = "run.json"
+EPISODES_FILE = "episodes.csv"
+EVALUATIONS_FILE = "evaluations.csv"
+
+
+class ProgressQueue(Protocol):
+    """Where a run reports its progress: a ``multiprocessing.Queue`` (or a ``queue.Queue`` in one process)."""
+
+    def put(self, obj: tuple[str, int]) -> None:
+        """:param obj: the run's name and its env steps so far"""
+
+
+#: The queue of a worker process of the pool (set by ``init_worker``)
+_worker_queue: ProgressQueue | None = None
+
+
+class TimedEvalCallback(EvalCallback):
+    """SB3's ``EvalCallback`` that also adds up the wall-clock time spent in it, to leave out of ``learn()``'s."""
+
+    eval_time = 0.0
+
+    def _on_step(self) -> bool:
+        start = time.perf_counter()
+        continue_training = super()._on_step()
+        self.eval_time += time.perf_counter() - start
+        return continue_training
+
+
+class ProgressCallback(BaseCallback):
+    """
+    Report ``num_timesteps`` to the parent process now and then.
+
+    :param name: the run's label
+    :param queue: where to put ``(name, num_timesteps)``
+    :param every: env steps between two reports
+    """
+
+    def __init__(self, name: str, queue: ProgressQueue, every: int):
+        super().__init__()
+        self.name = name
+        self.queue = queue
+        self.every = every
+        self._last = 0
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps - self._last >= self.every:
+            self._last = self.num_timesteps
+            self.queue.put((self.name, self.num_timesteps))
+        return True
+
+
+def episodes_from_monitors(monitor_dir: Path, n_envs: int) -> pd.DataFrame:
+    """
+    The training episodes of all envs, in the order they ended, from the Monitor files of a run
+    (``<rank>.monitor.csv``, one per env).
+
+    The envs of a ``DummyVecEnv`` step in lockstep: when env ``i`` has taken ``k`` steps, the run has taken
+    ``k * n_envs``. So the env step at which an episode ended is its env's cumulative episode length times ``n_envs``.
+
+    :param monitor_dir: the folder of the Monitor files
+    :param n_envs: the number of envs of the run
+    :return: one row per episode: ``episode`` (1-based, in end order), ``env_rank``, ``return``, ``length``,
+        ``end_step``
+    """
+    frames = []
+    for rank in range(n_envs):
+        monitor = pd.read_csv(monitor_dir / f"{rank}.{Monitor.EXT}", skiprows=1)
+        frames.append(
+            pd.DataFrame(
+                {
+                    "env_rank": rank,
+                    "return": monitor["r"].astype(float),
+                    "length": monitor["l"].astype(int),
+                    "end_step": monitor["l"].cumsum().astype(int) * n_envs,
+                }
+            )
+        )
+    episodes = pd.concat(frames, ignore_index=True).sort_values(["end_step", "env_rank"], kind="stable")
+    episodes.insert(0, "episode", np.arange(1, len(episodes) + 1))
+    return episodes.reset_index(drop=True)
+
+
+def evaluations_frame(timesteps: list[int], returns: list[list[float]], lengths: list[list[int]]) -> pd.DataFrame:
+    """
+    :return: one row per evaluation episode: ``eval_index`` (0-based), ``timesteps``, ``return``, ``length``
+    """
+    rows = [
+        {"eval_index": index, "timesteps": step, "return": float(episode_return), "length": int(length)}
+        for index, (step, episode_returns, episode_lengths) in enumerate(zip(timesteps, returns, lengths, strict=True))
+        for episode_return, length in zip(episode_returns, episode_lengths, strict=True)
+    ]
+    return pd.DataFrame(rows, columns=["eval_index", "timesteps", "return", "length"])
+
+
+def load_run(run_dir: Path) -> dict[str, Any]:
+    """:return: the summary (``run.json``) of a finished run"""
+    return json.loads((run_dir / RUN_FILE).read_text())
+
+
+def run_one(spec: RunSpec, cache_dir: Path, queue: ProgressQueue | None = None) -> dict[str, Any]:
+    """
+    Train ``spec`` unless it is cached, and cache it: ``run.json`` (settings, versions, timings),
+    ``episodes.csv`` (training episodes, from the Monitor files), ``evaluations.csv`` (the periodic deterministic
+    evaluations, and one at the end of training), ``hyperparams.yml``, ``train.log`` and the zoo's folder.
+
+    :param spec: the run
+    :param cache_dir: the cache root
+    :param queue: where to report progress (the run's name and its env steps), if anywhere
+    :return: the run's summary (``run.json``)
+    """
+    run_dir = spec.run_dir(cache_dir)
+    if (run_dir / RUN_FILE).exists():
+        return load_run(run_dir)
+    # Built in a scratch folder, moved into place when complete: an interrupted run leaves no partial cache entry
+    partial = run_dir.with_name(run_dir.name + ".partial")
+    shutil.rmtree(partial, ignore_errors=True)
+    partial.mkdir(parents=True)
+    # The exact YAML entry of the key, for the zoo to read (the source YAML may be edited meanwhile)
+    config = partial / "hyperparams.yml"
+    config.write_text(yaml.safe_dump({spec.env_id: spec.hyperparams}, sort_keys=True))
+
+    th.set_num_threads(1)
+    register_algorithms()
+    with open(partial / "train.log", "w") as log, redirect_stdout(log), redirect_stderr(log):
+        summary = _train(spec, partial, config, queue)
+    (partial / RUN_FILE).write_text(json.dumps(summary, indent=2, sort_keys=True))
+    shutil.rmtree(run_dir, ignore_errors=True)
+    partial.rename(run_dir)
+    return summary
+
+
+def init_worker(queue: ProgressQueue) -> None:
+    """
+    Initializer of the pool's processes: a multiprocessing queue reaches them at process start only.
+
+    :param queue: where ``run_in_worker`` reports progress
+    """
+    global _worker_queue
+    _worker_queue = queue
+
+
+def run_in_worker(spec: RunSpec, cache_dir: Path) -> dict[str, Any]:
+    """``run_one`` in a pool process, reporting progress to the queue of ``init_worker``."""
+    return run_one(spec, cache_dir, _worker_queue)
+
+
+def _train(spec: RunSpec, folder: Path, config: Path, queue: ProgressQueue | None) -> dict[str, Any]:
+    exp_manager = ExperimentManager(
+        argparse.Namespace(),
+        spec.algo,
+        spec.env_id,
+        str(folder / "zoo"),
+        n_timesteps=spec.n_timesteps,
+        # The harness adds its own evaluation below, timed apart from learning
+        eval_freq=0,
+        seed=spec.seed,
+        # The algorithm's default log interval, as the zoo's command line
+        log_interval=-1,
+        verbose=0,
+        device="cpu",
+        config=str(config),
+    )
+    setup = exp_manager.setup_experiment()
+    assert setup is not None, "the ExperimentManager only returns None when optimizing hyperparameters"
+    model, _ = setup
+    n_envs = exp_manager.n_envs
+    # One env per evaluation episode (up to 16): the episodes of an evaluation run side by side
+    eval_env = exp_manager.create_envs(min(spec.n_eval_episodes, 16), eval_env=True)
+    evaluation = TimedEvalCallback(
+        eval_env,
+        n_eval_episodes=spec.n_eval_episodes,
+        # Counted in calls, one per step of all envs (as the zoo does)
+        eval_freq=max(spec.eval_freq // n_envs, 1),
+        # The callback keeps its results only with a log path (it writes evaluations.npz there)
+        log_path=str(folder),
+        deterministic=exp_manager.deterministic_eval,
+        verbose=0,
+    )
+    callbacks: list[BaseCallback] = [*exp_manager.callbacks, evaluation]
+    if queue is not None:
+        callbacks.append(ProgressCallback(spec.name, queue, every=max(spec.n_timesteps // 200, 1)))
+
+    # model.learn, not exp_manager.learn: the zoo's swallows KeyboardInterrupt, and an interrupted run must not be cached
+    start = time.perf_counter()
+    model.learn(spec.n_timesteps, callback=callbacks)
+    learn_wall_time = time.perf_counter() - start
+    if model.num_timesteps < spec.n_timesteps:
+        raise RuntimeError(f"{spec.name} stopped at {model.num_timesteps} of {spec.n_timesteps} steps")
+    final_eval_time = _final_evaluation(model, evaluation)
+    assert model.env is not None
+    model.env.close()
+    eval_env.close()
+
+    episodes = episodes_from_monitors(Path(exp_manager.save_path), n_envs)
+    episodes.to_csv(folder / EPISODES_FILE, index=False)
+    evaluations = evaluations_frame(
+        evaluation.evaluations_timesteps, evaluation.evaluations_results, evaluation.evaluations_length
+    )
+    evaluations.to_csv(folder / EVALUATIONS_FILE, index=False)
+    learn_time = learn_wall_time - evaluation.eval_time
+    return {
+        "algo": spec.algo,
+        "env_id": spec.env_id,
+        "seed": spec.seed,
+        "n_timesteps": spec.n_timesteps,
+        "eval_freq": spec.eval_freq,
+        "n_eval_episodes": spec.n_eval_episodes,
+        "key": spec.key(),
+        "hyperparams": spec.hyperparams,
+        "versions": code_versions(spec.algo),
+        "n_envs": n_envs,
+        "num_timesteps": int(model.num_timesteps),
+        "n_episodes": len(episodes),
+        "learn_time_s": learn_time,
+        "eval_time_s": evaluation.eval_time + final_eval_time,
+        "steps_per_s": model.num_timesteps / learn_time,
+        "torch_threads": th.get_num_threads(),
+        "machine": f"{platform.machine()} {platform.processor() or platform.platform()}",
+        "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+    }
+
+
+def _final_evaluation(model: BaseAlgorithm, evaluation: TimedEvalCallback) -> float:
+    """
+    Evaluate the trained model once more unless the last periodic evaluation was at the end of training,
+    so that every run's last evaluation is of its final model.
+
+    :return: the time it took
+    """
+    if evaluation.evaluations_timesteps and evaluation.evaluations_timesteps[-1] == model.num_timesteps:
+        return 0.0
+    start = time.perf_counter()
+    training_env = model.get_env()
+    if model.get_vec_normalize_env() is not None and training_env is not None:
+        sync_envs_normalization(training_env, evaluation.eval_env)
+    returns, lengths = evaluate_policy(
+        model,
+        evaluation.eval_env,
+        n_eval_episodes=evaluation.n_eval_episodes,
+        deterministic=evaluation.deterministic,
+        return_episode_rewards=True,
+    )
+    assert isinstance(returns, list), "evaluate_policy returns lists with return_episode_rewards=True"
+    assert isinstance(lengths, list)
+    evaluation.evaluations_timesteps.append(model.num_timesteps)
+    evaluation.evaluations_results.append(returns)
+    evaluation.evaluations_length.append(lengths)
+    return time.perf_counter() - start

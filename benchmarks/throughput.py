@@ -1,0 +1,254 @@
+"""
+Throughput of ``learn()``: env steps per second of REINFORCE and NStepSARSA divided by A2C's, on the same env with
+the same network size, measured in one process, interleaved and repeated so that the machine's noise cancels.
+
+Run it alone with ``python -m benchmarks.throughput`` (``python -m benchmarks.run`` runs it after the learning runs).
+"""
+
+import argparse
+import shlex
+import sys
+import tempfile
+import time
+from collections.abc import Sequence
+from contextlib import redirect_stderr, redirect_stdout
+from dataclasses import dataclass
+from io import StringIO
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import torch as th
+from rich.console import Console
+from rich.progress import Progress
+from rl_zoo3.exp_manager import ExperimentManager
+from stable_baselines3.common.base_class import BaseAlgorithm
+
+from benchmarks.common import (
+    DEFAULT_RESULTS_DIR,
+    ENV_IDS,
+    LABELS,
+    QUICK_RESULTS_DIR,
+    code_versions,
+    hyperparams_path,
+    load_hyperparams,
+    register_algorithms,
+)
+from benchmarks.report import markdown_table
+
+THROUGHPUT_ALGOS = ("a2c", "reinforce", "nstep_sarsa")
+BASELINE = "a2c"
+NET_ARCH = [64, 64]
+#: The issue's target: at least this many times A2C's env steps per second
+TARGET_RATIO = 1.5
+
+
+@dataclass(frozen=True)
+class ThroughputSettings:
+    """
+    :param env_ids: the envs
+    :param n_envs: the numbers of envs to measure with
+    :param steps: env steps of each timed ``learn()``
+    :param repeats: timed ``learn()`` calls per algorithm, env and number of envs
+    """
+
+    env_ids: tuple[str, ...] = ENV_IDS
+    n_envs: tuple[int, ...] = (1, 8)
+    steps: int = 20_000
+    repeats: int = 5
+
+
+def throughput_hyperparams(algo: str, env_id: str, n_envs: int) -> dict[str, Any]:
+    """
+    The overrides of the zoo YAML entry for the throughput runs: ``n_envs``, no ``VecNormalize``, and
+    ``net_arch=[64, 64]`` with the entry's other ``policy_kwargs``.
+
+    :param algo: the algorithm
+    :param env_id: the env
+    :param n_envs: the number of envs
+    :return: the overrides (``policy_kwargs`` as a string, for the zoo to evaluate as it does the YAML's)
+    """
+    yaml_kwargs = load_hyperparams(algo, env_id).get("policy_kwargs")
+    # A dict display overriding the YAML's net_arch (a string too: the zoo evaluates it as it does the YAML's)
+    policy_kwargs = f"{{**{yaml_kwargs or 'dict()'}, 'net_arch': {NET_ARCH}}}"
+    return {"n_envs": n_envs, "normalize": False, "policy_kwargs": policy_kwargs}
+
+
+def build_model(algo: str, env_id: str, n_envs: int, seed: int, log_folder: Path) -> BaseAlgorithm:
+    """
+    :return: ``algo`` on ``n_envs`` copies of ``env_id``, built by rl-zoo3 from its YAML and ``throughput_hyperparams``
+    """
+    exp_manager = ExperimentManager(
+        argparse.Namespace(),
+        algo,
+        env_id,
+        str(log_folder),
+        hyperparams=throughput_hyperparams(algo, env_id, n_envs),
+        eval_freq=0,
+        seed=seed,
+        log_interval=-1,
+        verbose=0,
+        device="cpu",
+        config=str(hyperparams_path(algo)),
+    )
+    with redirect_stdout(StringIO()), redirect_stderr(StringIO()):
+        setup = exp_manager.setup_experiment()
+    assert setup is not None
+    return setup[0]
+
+
+def measure(algo: str, env_id: str, n_envs: int, steps: int, seed: int, log_folder: Path) -> dict[str, Any]:
+    """
+    Time ``learn(steps)`` of a new model (its construction is not timed).
+
+    :return: the measurement: ``algo``, ``env_id``, ``n_envs``, ``seed``, ``steps`` (taken), ``seconds``, ``steps_per_s``
+    """
+    model = build_model(algo, env_id, n_envs, seed, log_folder)
+    start = time.perf_counter()
+    model.learn(steps)
+    seconds = time.perf_counter() - start
+    assert model.env is not None
+    model.env.close()
+    return {
+        "algo": algo,
+        "env_id": env_id,
+        "n_envs": n_envs,
+        "seed": seed,
+        "steps": model.num_timesteps,
+        "seconds": seconds,
+        "steps_per_s": model.num_timesteps / seconds,
+    }
+
+
+def run_throughput(settings: ThroughputSettings, console: Console | None = None) -> pd.DataFrame:
+    """
+    Measure every algorithm ``settings.repeats`` times per env and number of envs. Within a repeat the algorithms
+    run back to back, in an order that rotates between repeats, so each ratio compares neighbours in time.
+
+    :param settings: what to measure
+    :param console: where to show progress
+    :return: one row per measurement (see ``measure``), with its ``repeat``
+    """
+    th.set_num_threads(1)
+    register_algorithms()
+    rows = []
+    n_algos = len(THROUGHPUT_ALGOS)
+    total = len(settings.env_ids) * len(settings.n_envs) * n_algos * (settings.repeats + 1)
+    with tempfile.TemporaryDirectory() as folder, Progress(console=console, transient=True) as progress:
+        task = progress.add_task("throughput", total=total)
+        for env_id in settings.env_ids:
+            for n_envs in settings.n_envs:
+                for algo in THROUGHPUT_ALGOS:
+                    # Warm-up, not recorded: first calls, lazy imports, allocator
+                    progress.update(task, description=f"warm-up {LABELS[algo]} {env_id} n_envs={n_envs}")
+                    measure(algo, env_id, n_envs, min(settings.steps, 1000), 0, Path(folder))
+                    progress.advance(task)
+                for repeat in range(settings.repeats):
+                    shift = repeat % n_algos
+                    for algo in THROUGHPUT_ALGOS[shift:] + THROUGHPUT_ALGOS[:shift]:
+                        progress.update(task, description=f"{LABELS[algo]} {env_id} n_envs={n_envs} repeat {repeat + 1}")
+                        rows.append({**measure(algo, env_id, n_envs, settings.steps, repeat, Path(folder)), "repeat": repeat})
+                        progress.advance(task)
+    return pd.DataFrame(rows)
+
+
+def throughput_ratios(measurements: pd.DataFrame) -> pd.DataFrame:
+    """
+    :param measurements: ``run_throughput``'s rows
+    :return: per env, number of envs and algorithm: the median steps/s over repeats, and the steps/s divided by A2C's
+        of the same repeat (median, min and max over repeats)
+    """
+    steps_per_s = measurements.pivot_table(index=["env_id", "n_envs", "repeat"], columns="algo", values="steps_per_s")
+    ratios = steps_per_s.div(steps_per_s[BASELINE], axis=0)
+    by_setting = ["env_id", "n_envs"]
+    summary = pd.concat(
+        {
+            "steps_per_s": steps_per_s.groupby(level=by_setting, sort=False).median().stack(),
+            "ratio": ratios.groupby(level=by_setting, sort=False).median().stack(),
+            "ratio_min": ratios.groupby(level=by_setting, sort=False).min().stack(),
+            "ratio_max": ratios.groupby(level=by_setting, sort=False).max().stack(),
+        },
+        axis=1,
+    )
+    return summary.reset_index()
+
+
+def throughput_table(measurements: pd.DataFrame) -> pd.DataFrame:
+    """
+    :param measurements: ``run_throughput``'s rows
+    :return: one row per env and number of envs: each algorithm's median steps/s, ours divided by A2C's as
+        median (min–max) over repeats, and whether the median meets the target
+    """
+    summary = throughput_ratios(measurements).set_index(["env_id", "n_envs", "algo"])
+    rows = []
+    # In the order measured
+    for env_id, n_envs in measurements[["env_id", "n_envs"]].drop_duplicates().itertuples(index=False):
+        row: dict[str, Any] = {"Env": env_id, "n_envs": n_envs}
+        for algo in THROUGHPUT_ALGOS:
+            result = summary.loc[(env_id, n_envs, algo)]
+            row[f"{LABELS[algo]} steps/s"] = f"{result['steps_per_s']:,.0f}"
+            if algo != BASELINE:
+                ratio = f"{result['ratio']:.2f}× ({result['ratio_min']:.2f}–{result['ratio_max']:.2f})"
+                row[f"{LABELS[algo]} / {LABELS[BASELINE]}"] = ratio
+                row[f"{LABELS[algo]} ≥ {TARGET_RATIO:g}×"] = "yes" if result["ratio"] >= TARGET_RATIO else "no"
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def throughput_header(command: str, settings: ThroughputSettings) -> str:
+    """:return: the markdown above the throughput table: the command and the settings"""
+    versions = ", ".join(f"{name} {version}" for name, version in code_versions("reinforce").items())
+    return (
+        "# Throughput of `learn()`\n\n"
+        f"Produced by:\n\n```\n{command}\n```\n\n"
+        f"Env steps per second of `learn({settings.steps})` from a new model (construction not timed), "
+        f"{settings.repeats} repeats, the algorithms interleaved in one process in a rotating order; "
+        f"all networks `net_arch={NET_ARCH}`, otherwise each algorithm's zoo YAML entry for the env "
+        "(A2C: rl-zoo3's, which is SB3's defaults here), without VecNormalize; torch 1 thread, device cpu. "
+        f"Ratios are ours divided by A2C's within the same repeat: median (min–max) over repeats. "
+        f"Target of issue 5: ≥ {TARGET_RATIO:g}× at n_envs 1 and 8.\n\nVersions: {versions}."
+    )
+
+
+def write_throughput_report(measurements: pd.DataFrame, header: str, results_dir: Path) -> Path:
+    """
+    Write ``throughput.md`` (header and table) and ``throughput.csv`` (every measurement).
+
+    :return: the markdown file
+    """
+    results_dir.mkdir(parents=True, exist_ok=True)
+    measurements.to_csv(results_dir / "throughput.csv", index=False, float_format="%.6g")
+    path = results_dir / "throughput.md"
+    path.write_text(f"{header}\n\n{markdown_table(throughput_table(measurements))}\n")
+    return path
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    """The command line: ``python -m benchmarks.throughput [--quick] [--steps N] [--repeats N] ...``."""
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="2,000 steps, 3 repeats, written to the scratch folder")
+    parser.add_argument("--envs", nargs="+", default=list(ENV_IDS), choices=ENV_IDS, help="envs to measure")
+    parser.add_argument("--n-envs", nargs="+", type=int, default=[1, 8], help="numbers of envs to measure with")
+    parser.add_argument("--steps", type=int, help="env steps of each timed learn() (default 20,000)")
+    parser.add_argument("--repeats", type=int, help="timed learn() calls per algorithm and setting (default 5)")
+    parser.add_argument("--results-dir", type=Path, help=f"where to write (default {DEFAULT_RESULTS_DIR})")
+    args = parser.parse_args(argv)
+    quick = ThroughputSettings(steps=2_000, repeats=3) if args.quick else ThroughputSettings()
+    settings = ThroughputSettings(
+        env_ids=tuple(args.envs),
+        n_envs=tuple(args.n_envs),
+        steps=args.steps or quick.steps,
+        repeats=args.repeats or quick.repeats,
+    )
+    results_dir = args.results_dir or (QUICK_RESULTS_DIR if args.quick else DEFAULT_RESULTS_DIR)
+    console = Console()
+    command = shlex.join(["python", "-m", "benchmarks.throughput", *(sys.argv[1:] if argv is None else argv)])
+    start = time.perf_counter()
+    measurements = run_throughput(settings, console)
+    path = write_throughput_report(measurements, throughput_header(command, settings), results_dir)
+    console.print(markdown_table(throughput_table(measurements)), soft_wrap=True, markup=False)
+    console.print(f"Wrote {path} in {time.perf_counter() - start:.0f} s")
+
+
+if __name__ == "__main__":
+    main()

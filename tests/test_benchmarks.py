@@ -1,0 +1,254 @@
+"""The benchmark harness's own logic: threshold crossings, episode counts, cache keys, budgets, ratios, one real run."""
+
+import dataclasses
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from benchmarks import runner
+from benchmarks.common import REPO_ROOT, RunSpec, code_versions
+from benchmarks.report import Results, episode_curves, episodes_by, first_crossing, summary_table, threshold_crossings
+from benchmarks.run import FULL, QUICK, make_specs, parse_budgets
+from benchmarks.runner import RUN_FILE, episodes_from_monitors, run_one
+from benchmarks.throughput import throughput_ratios, throughput_table
+
+SPEC = RunSpec(
+    algo="reinforce",
+    env_id="CartPole-v1",
+    seed=0,
+    n_timesteps=1000,
+    eval_freq=500,
+    n_eval_episodes=2,
+    hyperparams_yaml="learning_rate: 0.003\npolicy: MlpPolicy\n",
+)
+
+
+def test_first_crossing() -> None:
+    steps = np.array([1000, 2000, 3000, 4000])
+    assert first_crossing(steps, np.array([100.0, 480.0, 300.0, 500.0]), 475.0) == 2000
+    # Reaching the threshold counts; for Acrobot it is negative
+    assert first_crossing(steps, np.array([-500.0, -120.0, -100.0, -80.0]), -100.0) == 3000
+    assert first_crossing(steps, np.array([10.0, 20.0, 30.0, 474.9]), 475.0) is None
+    assert first_crossing(np.array([]), np.array([]), 475.0) is None
+
+
+def test_episodes_by() -> None:
+    end_steps = np.array([20, 45, 45, 100])
+    assert episodes_by(end_steps, 19) == 0
+    assert episodes_by(end_steps, 45) == 3
+    assert episodes_by(end_steps, 10_000) == 4
+
+
+def write_monitor(path: Path, lengths: list[int]) -> None:
+    rows = "".join(f"{float(length)},{length},{index * 0.1:.1f}\n" for index, length in enumerate(lengths))
+    path.write_text('#{"t_start": 0.0, "env_id": "CartPole-v1"}\nr,l,t\n' + rows)
+
+
+def test_episodes_from_monitors_orders_the_envs_by_end_step(tmp_path: Path) -> None:
+    # Two envs in lockstep: env 0 ends episodes at its steps 3 and 5, env 1 at its step 2 (run steps ×2)
+    write_monitor(tmp_path / "0.monitor.csv", [3, 2])
+    write_monitor(tmp_path / "1.monitor.csv", [2])
+    episodes = episodes_from_monitors(tmp_path, n_envs=2)
+    assert episodes["episode"].tolist() == [1, 2, 3]
+    assert episodes["env_rank"].tolist() == [1, 0, 0]
+    assert episodes["end_step"].tolist() == [4, 6, 10]
+    assert episodes["return"].tolist() == [2.0, 3.0, 2.0]
+
+
+def synthetic_results() -> Results:
+    """Three CartPole-v1 seeds of REINFORCE: reaching 475 at 2000 and 3000 steps, and never."""
+    timesteps = [1000, 2000, 3000]
+    mean_returns = {0: [100.0, 480.0, 490.0], 1: [50.0, 200.0, 475.0], 2: [20.0, 30.0, 40.0]}
+    evaluations = pd.DataFrame(
+        [
+            {"algo": "reinforce", "env_id": "CartPole-v1", "seed": seed, "eval_index": index, "timesteps": step, "return": r}
+            for seed, returns in mean_returns.items()
+            for index, (step, mean) in enumerate(zip(timesteps, returns, strict=True))
+            # Two episodes per evaluation around the mean
+            for r in (mean - 1.0, mean + 1.0)
+        ]
+    )
+    # One training episode ends every 250 steps for seed 0, every 500 steps for the others
+    episodes = pd.DataFrame(
+        [
+            {"algo": "reinforce", "env_id": "CartPole-v1", "seed": seed, "episode": index + 1, "end_step": end, "return": 1.0}
+            for seed, every in ((0, 250), (1, 500), (2, 500))
+            for index, end in enumerate(range(every, 3001, every))
+        ]
+    )
+    runs = pd.DataFrame(
+        [
+            {
+                "algo": "reinforce",
+                "env_id": "CartPole-v1",
+                "seed": seed,
+                "n_envs": 1,
+                "num_timesteps": 3000,
+                "n_episodes": 3000 // every,
+                "learn_time_s": 10.0,
+                "steps_per_s": 300.0,
+            }
+            for seed, every in ((0, 250), (1, 500), (2, 500))
+        ]
+    )
+    return Results(runs=runs, episodes=episodes, evaluations=evaluations, missing=[])
+
+
+def test_threshold_crossings() -> None:
+    crossings = threshold_crossings(synthetic_results()).set_index("seed")
+    assert crossings.loc[0, "steps_to_threshold"] == 2000
+    assert crossings.loc[0, "episodes_to_threshold"] == 8
+    assert crossings.loc[1, "steps_to_threshold"] == 3000
+    assert crossings.loc[1, "episodes_to_threshold"] == 6
+    assert np.isnan(crossings.loc[2, "steps_to_threshold"])
+    assert np.isnan(crossings.loc[2, "episodes_to_threshold"])
+    assert crossings["final_return"].tolist() == [490.0, 475.0, 40.0]
+
+
+def test_summary_table() -> None:
+    results = synthetic_results()
+    table = summary_table(results, threshold_crossings(results), "CartPole-v1", ["reinforce", "a2c"])
+    # A2C has no runs: no row
+    assert table["Algorithm"].tolist() == ["REINFORCE"]
+    row = table.iloc[0]
+    assert row["Seeds"] == 3
+    assert row["Seeds reaching 475"] == "2/3"
+    assert row["Env steps to threshold"] == "2,500 (2,000–3,000)"
+    assert row["Episodes to threshold"] == "7 (6–8)"
+    assert row["Final eval return"] == f"335.0 ± {np.std([490.0, 475.0, 40.0], ddof=1):.1f}"
+
+
+def test_run_key_covers_what_changes_the_result(tmp_path: Path) -> None:
+    variants = [
+        dataclasses.replace(SPEC, algo="nstep_sarsa"),
+        dataclasses.replace(SPEC, env_id="Acrobot-v1"),
+        dataclasses.replace(SPEC, seed=1),
+        dataclasses.replace(SPEC, n_timesteps=2000),
+        dataclasses.replace(SPEC, eval_freq=250),
+        dataclasses.replace(SPEC, n_eval_episodes=3),
+        dataclasses.replace(SPEC, hyperparams_yaml="learning_rate: 0.001\npolicy: MlpPolicy\n"),
+    ]
+    run_dirs = {spec.run_dir(tmp_path) for spec in [SPEC, *variants]}
+    assert len(run_dirs) == len(variants) + 1
+    # The same hyperparameters written another way are the same run
+    reordered = dataclasses.replace(SPEC, hyperparams_yaml="policy: 'MlpPolicy'\nlearning_rate: !!float 3e-3\n")
+    assert reordered.run_dir(tmp_path) == SPEC.run_dir(tmp_path)
+    assert SPEC.run_dir(tmp_path).relative_to(tmp_path).parts[:3] == ("CartPole-v1", "reinforce", "seed_0")
+
+
+def test_code_versions() -> None:
+    # Our algorithms' runs depend on the package's sources, the peers' do not
+    assert "sb3_classic" in code_versions("reinforce")
+    assert "sb3_classic" not in code_versions("a2c")
+    assert code_versions("a2c").items() <= code_versions("reinforce").items()
+
+
+def test_parse_budgets() -> None:
+    envs = ["CartPole-v1", "Acrobot-v1"]
+    defaults = {"CartPole-v1": 5, "Acrobot-v1": 6}
+    assert parse_budgets([], envs, defaults) == defaults
+    assert parse_budgets(["3e5"], envs, defaults) == {"CartPole-v1": 300_000, "Acrobot-v1": 300_000}
+    assert parse_budgets(["1e5", "Acrobot-v1=2000"], envs, defaults) == {"CartPole-v1": 100_000, "Acrobot-v1": 2000}
+    with pytest.raises(ValueError, match="MountainCar-v0"):
+        parse_budgets(["MountainCar-v0=1000"], envs, defaults)
+    with pytest.raises(ValueError, match="positive number"):
+        parse_budgets(["CartPole-v1=lots"], envs, defaults)
+
+
+def test_make_specs_share_budgets_and_seeds() -> None:
+    specs = make_specs(FULL, ["CartPole-v1", "Acrobot-v1"], ["reinforce", "nstep_sarsa", "a2c", "ppo", "dqn"])
+    seeds = {
+        algo: sorted(spec.seed for spec in specs if spec.algo == algo and spec.env_id == "CartPole-v1")
+        for algo in ["a2c", "reinforce"]
+    }
+    assert seeds == {"a2c": list(range(FULL.peer_seeds)), "reinforce": list(range(FULL.seeds))}
+    assert len(specs) == 2 * (2 * FULL.seeds + 3 * FULL.peer_seeds)
+    for env_id in ("CartPole-v1", "Acrobot-v1"):
+        assert {spec.n_timesteps for spec in specs if spec.env_id == env_id} == {FULL.budgets[env_id]}
+    assert len({spec.name for spec in specs}) == len(specs)
+    assert QUICK.budgets["CartPole-v1"] < FULL.budgets["CartPole-v1"]
+
+
+def test_throughput_ratios_pair_each_repeat() -> None:
+    rows = [
+        {"env_id": "CartPole-v1", "n_envs": n_envs, "repeat": repeat, "algo": algo, "steps_per_s": sps}
+        for n_envs, repeat, algo, sps in [
+            (1, 0, "a2c", 1000.0),
+            (1, 0, "reinforce", 3000.0),
+            (1, 0, "nstep_sarsa", 1000.0),
+            (1, 1, "a2c", 500.0),  # a slow moment of the machine: the ratio of the repeat holds
+            (1, 1, "reinforce", 2000.0),
+            (1, 1, "nstep_sarsa", 600.0),
+        ]
+    ]
+    ratios = throughput_ratios(pd.DataFrame(rows)).set_index("algo")
+    assert ratios.loc["reinforce", "ratio_min"] == 3.0
+    assert ratios.loc["reinforce", "ratio_max"] == 4.0
+    assert ratios.loc["reinforce", "ratio"] == 3.5
+    assert ratios.loc["nstep_sarsa", "ratio"] == pytest.approx(1.1)
+    table = throughput_table(pd.DataFrame(rows))
+    assert table.loc[0, "REINFORCE / A2C"] == "3.50× (3.00–4.00)"
+    assert table.loc[0, "REINFORCE ≥ 1.5×"] == "yes"
+    assert table.loc[0, "NStepSARSA ≥ 1.5×"] == "no"
+
+
+def test_run_one_trains_once_and_caches(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    spec = RunSpec.create("reinforce", "CartPole-v1", seed=0, n_timesteps=300, eval_freq=100, n_eval_episodes=2)
+    summary = run_one(spec, tmp_path)
+    run_dir = spec.run_dir(tmp_path)
+    assert json.loads((run_dir / RUN_FILE).read_text()) == summary
+    assert summary["num_timesteps"] >= 300
+    assert summary["steps_per_s"] > 0
+    evaluations = pd.read_csv(run_dir / runner.EVALUATIONS_FILE)
+    # Every 100 steps, and the last one at the end of training
+    assert evaluations["timesteps"].unique().tolist()[:3] == [100, 200, 300]
+    assert evaluations["timesteps"].iloc[-1] == summary["num_timesteps"]
+    assert (evaluations.groupby("eval_index").size() == 2).all()
+    episodes = pd.read_csv(run_dir / runner.EPISODES_FILE)
+    assert len(episodes) == summary["n_episodes"] > 0
+    assert episodes["end_step"].is_monotonic_increasing
+    assert not list(tmp_path.rglob("*.partial"))
+
+    # A cached run is read back, not run again
+    def fail(*args: object) -> None:
+        raise AssertionError("a cached run was trained again")
+
+    monkeypatch.setattr(runner, "_train", fail)
+    assert run_one(spec, tmp_path) == summary
+
+
+def test_command_line(tmp_path: Path) -> None:
+    """The real command, on one small run: the cache, the report and its command line."""
+    command = [
+        sys.executable,
+        "-m",
+        "benchmarks.run",
+        *("--envs", "CartPole-v1", "--algos", "nstep_sarsa", "--seeds", "1", "--peer-seeds", "0"),
+        *("--budget", "300", "--eval-freq", "100", "--eval-episodes", "2", "--workers", "1"),
+        *("--cache-dir", str(tmp_path / "cache"), "--results-dir", str(tmp_path / "results"), "--skip-throughput"),
+    ]
+    completed = subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
+    assert completed.returncode == 0, completed.stdout + completed.stderr
+    markdown = (tmp_path / "results" / "learning.md").read_text()
+    assert "python -m benchmarks.run --envs CartPole-v1 --algos nstep_sarsa" in markdown
+    assert "| NStepSARSA | 1 |" in markdown
+    for name in ("CartPole-v1-episodes.png", "CartPole-v1-steps.png", "learning-runs.csv"):
+        assert (tmp_path / "results" / name).stat().st_size > 0
+    assert len(list((tmp_path / "cache").rglob(RUN_FILE))) == 1
+
+
+def test_episode_curves_share_the_episodes_every_run_completed() -> None:
+    results = synthetic_results()
+    # A second algorithm whose only seed completed 4 episodes
+    other = results.episodes[results.episodes["seed"] == 1].head(4).assign(algo="nstep_sarsa")
+    results.episodes = pd.concat([results.episodes, other], ignore_index=True)
+    curves = episode_curves(results, "CartPole-v1", ["reinforce", "nstep_sarsa", "a2c"])
+    assert list(curves) == ["reinforce", "nstep_sarsa"]
+    # REINFORCE's seeds 1 and 2 completed 6 episodes, but NStepSARSA's only 4
+    assert [len(curve) for curve in curves.values()] == [4, 4]
+    assert (curves["reinforce"]["count"] == 3).all()
