@@ -1,0 +1,329 @@
+"""
+Registration of REINFORCE and n-step SARSA with rl-zoo3 (``python -m rl_zoo3.train --algo reinforce|nstep_sarsa``).
+
+rl-zoo3 has no plug-in mechanism: its commands take ``--algo`` choices from ``rl_zoo3.utils.ALGOS``, Optuna
+search spaces from ``rl_zoo3.hyperparams_opt``, and default hyperparameters from its own package folder.
+``register()`` adds this package to each of them. It runs by itself when ``rl_zoo3`` is imported: the wheel installs
+``_sb3_classic_zoo.pth``, whose start-up hook (``_sb3_classic_zoo.py``) calls it then, and imports nothing heavy
+before. Call it yourself only where that hook does not run (``python -S``).
+
+What ``register()`` changes in rl-zoo3, and nothing else:
+
+- ``rl_zoo3.utils.ALGOS`` (also ``rl_zoo3.ALGOS``) gains ``"reinforce"`` and ``"nstep_sarsa"``;
+- ``rl_zoo3.hyperparams_opt.HYPERPARAMS_SAMPLER`` and ``HYPERPARAMS_CONVERTER`` gain their Optuna search spaces
+  (``-optimize``) and the conversion of a stored trial back into constructor arguments (``--trial-id``);
+- ``ExperimentManager.__init__`` defaults ``config`` to this package's YAML for these two algorithms (``-conf``
+  still wins);
+- ``ExperimentManager._preprocess_schedules`` also reads ``value_learning_rate`` (REINFORCE's second learning rate)
+  as the zoo reads ``learning_rate``: ``lin_0.01`` for a linear schedule.
+"""
+
+import functools
+import importlib
+import inspect
+from collections.abc import Callable
+from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
+
+from torch import nn
+
+from sb3_classic.common.torch_layers import WEIGHT_INITS
+from sb3_classic.reinforce import REINFORCE
+from sb3_classic.sarsa import NStepSARSA
+
+if TYPE_CHECKING:
+    import optuna
+
+#: The rl-zoo3 versions this module patches (the ``zoo`` extra's requirement)
+SUPPORTED_RL_ZOO3 = ">=2.9,<3"
+
+#: ``--algo`` names and their classes
+ALGORITHMS: dict[str, type[REINFORCE] | type[NStepSARSA]] = {"reinforce": REINFORCE, "nstep_sarsa": NStepSARSA}
+
+# Where the YAMLs are: inside the installed package (the wheel's force-include), else the source tree's hyperparams/
+# (an editable install, or a checkout on sys.path)
+_HYPERPARAMS_DIRS = (Path(__file__).parent / "hyperparams", Path(__file__).parent.parent / "hyperparams")
+
+# Marks what register() has patched, so that it patches each thing once
+_PATCHED = "_sb3_classic_zoo"
+# True while register() imports rl_zoo3
+_registering = False
+
+# The search spaces' names for what they sample, as the zoo's own samplers name them
+ACTIVATIONS: dict[str, type[nn.Module]] = {"tanh": nn.Tanh, "relu": nn.ReLU, "leaky_relu": nn.LeakyReLU, "elu": nn.ELU}
+LAYER_SIZES = (32, 64, 128, 256)
+MAX_LAYERS = 3
+# Learning-rate step decay: factor per decay (1.0: none), and every how many episodes
+LR_DECAY_FACTORS = (1.0, 0.95, 0.9, 0.8, 0.5)
+LR_DECAY_EVERY = (10, 25, 50, 100, 250)
+
+
+class ZooCompatibilityError(ImportError):
+    """The installed rl-zoo3 lacks something ``register()`` patches."""
+
+
+def hyperparams_path(algo: str) -> Path:
+    """
+    :param algo: ``"reinforce"`` or ``"nstep_sarsa"``
+    :return: the package's rl-zoo3 YAML of default hyperparameters for ``algo``
+    """
+    if algo not in ALGORITHMS:
+        raise ValueError(f"algo={algo!r} must be one of {', '.join(map(repr, ALGORITHMS))}")
+    for directory in _HYPERPARAMS_DIRS:
+        path = directory / f"{algo}.yml"
+        if path.is_file():
+            return path
+    searched = " or ".join(str(directory) for directory in _HYPERPARAMS_DIRS)
+    raise FileNotFoundError(f"{algo}.yml is in neither {searched}: reinstall sb3_classic")
+
+
+def _suggest_network(trial: "optuna.Trial") -> dict[str, Any]:
+    """Sample the network's depth, width, activation and initialisation (the same for every network of the policy)."""
+    return {
+        "n_layers": trial.suggest_int("n_layers", 1, MAX_LAYERS),
+        "layer_size": trial.suggest_categorical("layer_size", LAYER_SIZES),
+        "activation_fn": trial.suggest_categorical("activation_fn", tuple(ACTIVATIONS)),
+        "weight_init": trial.suggest_categorical("weight_init", WEIGHT_INITS),
+    }
+
+
+def _suggest_lr_decay(trial: "optuna.Trial") -> dict[str, Any]:
+    """Sample a step decay of the learning rate(s), counted in episodes (1.0: no decay)."""
+    return {
+        "lr_decay_factor": trial.suggest_categorical("lr_decay_factor", LR_DECAY_FACTORS),
+        "lr_decay_every": trial.suggest_categorical("lr_decay_every", LR_DECAY_EVERY),
+    }
+
+
+def _convert_common(sampled_params: dict[str, Any]) -> dict[str, Any]:
+    """
+    The conversions both search spaces share: γ from 1 − γ, ``policy_kwargs`` from the network's parameters, and a
+    step decay counted in episodes that replaces the YAML's (whose milestones would conflict with ``lr_decay_every``).
+
+    :param sampled_params: a trial's parameters
+    :return: constructor arguments
+    """
+    hyperparams = dict(sampled_params)
+    hyperparams["gamma"] = 1 - hyperparams.pop("one_minus_gamma")
+    n_layers, layer_size = hyperparams.pop("n_layers"), hyperparams.pop("layer_size")
+    hyperparams["policy_kwargs"] = {
+        "net_arch": [layer_size] * n_layers,
+        "activation_fn": ACTIVATIONS[hyperparams.pop("activation_fn")],
+        "weight_init": hyperparams.pop("weight_init"),
+    }
+    hyperparams.update(lr_decay_milestones=None, lr_decay_unit="episode")
+    return hyperparams
+
+
+def convert_reinforce_params(sampled_params: dict[str, Any]) -> dict[str, Any]:
+    """
+    Turn the parameters of a trial of ``sample_reinforce_params`` into ``REINFORCE`` arguments
+    (rl-zoo3 calls it to train with a stored trial: ``--storage ... --study-name ... --trial-id N``).
+
+    :param sampled_params: the trial's parameters (``trial.params``)
+    :return: keyword arguments of ``REINFORCE``
+    """
+    return _convert_common(sampled_params)
+
+
+def sample_reinforce_params(
+    trial: "optuna.Trial", n_actions: int, n_envs: int, additional_args: dict[str, Any]
+) -> dict[str, Any]:
+    """
+    Optuna search space of REINFORCE with baseline (rl-zoo3's ``-optimize``): both learning rates, episodes per
+    update, γ, advantage normalisation, entropy bonus, learning-rate step decay, and the networks' depth, width,
+    activation and initialisation.
+
+    :param trial: the Optuna trial to sample from
+    :param n_actions: size of a Box action space (unused)
+    :param n_envs: number of envs (unused)
+    :param additional_args: rl-zoo3's extra information (unused)
+    :return: keyword arguments of ``REINFORCE``
+    """
+    sampled_params = {
+        # α^θ and α^w: the seed report's best are 0.003/0.01 (CartPole) and 0.001/0.1 (Acrobot)
+        "learning_rate": trial.suggest_float("learning_rate", 1e-4, 1e-2, log=True),
+        "value_learning_rate": trial.suggest_float("value_learning_rate", 1e-4, 1e-1, log=True),
+        "n_episodes": trial.suggest_categorical("n_episodes", (1, 2, 4, 8, 16)),
+        "one_minus_gamma": trial.suggest_float("one_minus_gamma", 1e-4, 0.03, log=True),
+        "normalize_advantage": trial.suggest_categorical("normalize_advantage", (False, True)),
+        "ent_coef": trial.suggest_float("ent_coef", 1e-8, 0.1, log=True),
+        **_suggest_lr_decay(trial),
+        **_suggest_network(trial),
+    }
+    trial.set_user_attr("gamma", 1 - sampled_params["one_minus_gamma"])
+    return convert_reinforce_params(sampled_params)
+
+
+def convert_nstep_sarsa_params(sampled_params: dict[str, Any]) -> dict[str, Any]:
+    """
+    Turn the parameters of a trial of ``sample_nstep_sarsa_params`` into ``NStepSARSA`` arguments
+    (rl-zoo3 calls it to train with a stored trial: ``--storage ... --study-name ... --trial-id N``).
+
+    :param sampled_params: the trial's parameters (``trial.params``)
+    :return: keyword arguments of ``NStepSARSA``
+    """
+    hyperparams = _convert_common(sampled_params)
+    # The sampled ε decay is per episode
+    hyperparams["exploration_schedule"] = "exponential"
+    return hyperparams
+
+
+def sample_nstep_sarsa_params(
+    trial: "optuna.Trial", n_actions: int, n_envs: int, additional_args: dict[str, Any]
+) -> dict[str, Any]:
+    """
+    Optuna search space of n-step SARSA (rl-zoo3's ``-optimize``): n, learning rate, steps and gradient steps per
+    update, γ, Expected SARSA or not, the exponential ε decay (rate and floor), the loss, learning-rate step decay,
+    and the Q-network's depth, width, activation and initialisation.
+
+    :param trial: the Optuna trial to sample from
+    :param n_actions: size of a Box action space (unused)
+    :param n_envs: number of envs (unused)
+    :param additional_args: rl-zoo3's extra information (unused)
+    :return: keyword arguments of ``NStepSARSA``
+    """
+    sampled_params = {
+        # The seed report's best: n=10, α=0.0005 (CartPole); n=5, α=0.001 (Acrobot)
+        "n_steps": trial.suggest_categorical("n_steps", (1, 2, 3, 5, 10, 20)),
+        "learning_rate": trial.suggest_float("learning_rate", 1e-5, 1e-2, log=True),
+        "train_freq": trial.suggest_categorical("train_freq", (1, 4, 8, 16, 32, 64)),
+        "gradient_steps": trial.suggest_categorical("gradient_steps", (1, 2, 4)),
+        "one_minus_gamma": trial.suggest_float("one_minus_gamma", 1e-4, 0.03, log=True),
+        "expected_sarsa": trial.suggest_categorical("expected_sarsa", (False, True)),
+        # ε ← max(ε_final, ε · rate) per episode
+        "exploration_decay_rate": trial.suggest_categorical("exploration_decay_rate", (0.9, 0.95, 0.98, 0.99, 0.995, 0.999)),
+        "exploration_final_eps": trial.suggest_float("exploration_final_eps", 0.0, 0.2),
+        "loss_function": trial.suggest_categorical("loss_function", ("mse", "huber")),
+        **_suggest_lr_decay(trial),
+        **_suggest_network(trial),
+    }
+    trial.set_user_attr("gamma", 1 - sampled_params["one_minus_gamma"])
+    return convert_nstep_sarsa_params(sampled_params)
+
+
+SAMPLERS: dict[str, Callable[["optuna.Trial", int, int, dict[str, Any]], dict[str, Any]]] = {
+    "reinforce": sample_reinforce_params,
+    "nstep_sarsa": sample_nstep_sarsa_params,
+}
+CONVERTERS: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] = {
+    "reinforce": convert_reinforce_params,
+    "nstep_sarsa": convert_nstep_sarsa_params,
+}
+
+
+def _incompatible(version: str, problem: str) -> ZooCompatibilityError:
+    return ZooCompatibilityError(
+        f"sb3_classic cannot register reinforce and nstep_sarsa with the installed rl_zoo3 {version}: {problem}. "
+        f"sb3_classic supports rl_zoo3{SUPPORTED_RL_ZOO3}: pip install 'rl_zoo3{SUPPORTED_RL_ZOO3}'"
+    )
+
+
+def _dict_attribute(module: ModuleType, name: str, version: str) -> dict[str, Any]:
+    """
+    :param module: a module of rl_zoo3
+    :param name: the name of one of its dicts
+    :param version: rl_zoo3's version, for the error message
+    :return: the dict
+    """
+    table = getattr(module, name, None)
+    if not isinstance(table, dict):
+        raise _incompatible(version, f"{module.__name__}.{name} is not a dict")
+    return table
+
+
+def _zoo_targets() -> tuple[dict[str, Any], dict[str, Any], dict[str, Any], type]:
+    """
+    Import what ``register()`` patches, checking that it is there and has the expected shape.
+
+    :return: ``ALGOS``, ``HYPERPARAMS_SAMPLER``, ``HYPERPARAMS_CONVERTER``, ``ExperimentManager``
+    """
+    try:
+        import rl_zoo3
+    except ImportError as error:
+        raise ImportError(f"rl_zoo3 is not installed ({error}): pip install 'sb3_classic[zoo]'") from error
+    version = str(getattr(rl_zoo3, "__version__", "of unknown version"))
+    try:
+        utils, hyperparams_opt, exp_manager = (
+            importlib.import_module(f"rl_zoo3.{name}") for name in ("utils", "hyperparams_opt", "exp_manager")
+        )
+    except ImportError as error:
+        raise _incompatible(version, f"importing it failed ({error})") from None
+
+    algos = _dict_attribute(utils, "ALGOS", version)
+    samplers = _dict_attribute(hyperparams_opt, "HYPERPARAMS_SAMPLER", version)
+    converters = _dict_attribute(hyperparams_opt, "HYPERPARAMS_CONVERTER", version)
+    manager = getattr(exp_manager, "ExperimentManager", None)
+    if not inspect.isclass(manager):
+        raise _incompatible(version, "rl_zoo3.exp_manager.ExperimentManager is missing")
+    parameters = inspect.signature(manager.__init__).parameters
+    if not {"algo", "config"} <= parameters.keys():
+        raise _incompatible(version, "ExperimentManager.__init__ has no 'algo' and 'config' arguments")
+    if not isinstance(inspect.getattr_static(manager, "_preprocess_schedules", None), staticmethod):
+        raise _incompatible(version, "ExperimentManager._preprocess_schedules is not a static method")
+    return algos, samplers, converters, manager
+
+
+def _patch_default_config(manager: type) -> None:
+    """Make ``ExperimentManager`` read this package's YAML for its algorithms when no ``config`` (``-conf``) is given."""
+    original_init = manager.__init__  # type: ignore[misc]
+    if getattr(original_init, _PATCHED, False):
+        return
+    signature = inspect.signature(original_init)
+
+    @functools.wraps(original_init)
+    def __init__(*args: Any, **kwargs: Any) -> None:
+        bound = signature.bind(*args, **kwargs)
+        algo = bound.arguments.get("algo")
+        if bound.arguments.get("config") is None and algo in ALGORITHMS:
+            bound.arguments["config"] = str(hyperparams_path(algo))
+        original_init(*bound.args, **bound.kwargs)
+
+    setattr(__init__, _PATCHED, True)
+    manager.__init__ = __init__  # type: ignore[misc]
+
+
+def _patch_value_learning_rate(manager: type) -> None:
+    """Make ``ExperimentManager`` read ``value_learning_rate`` as it reads ``learning_rate`` (``lin_0.01``)."""
+    original = manager._preprocess_schedules  # type: ignore[attr-defined]
+    if getattr(original, _PATCHED, False):
+        return
+
+    @functools.wraps(original)
+    def _preprocess_schedules(hyperparams: dict[str, Any]) -> dict[str, Any]:
+        hyperparams = original(hyperparams)
+        value = hyperparams.get("value_learning_rate")
+        if isinstance(value, (str, int, float)):
+            # The zoo's own parsing of learning_rate (a number, or "lin_<initial value>"), for REINFORCE's second one
+            hyperparams["value_learning_rate"] = original({"learning_rate": value})["learning_rate"]
+        return hyperparams
+
+    setattr(_preprocess_schedules, _PATCHED, True)
+    manager._preprocess_schedules = staticmethod(_preprocess_schedules)  # type: ignore[attr-defined]
+
+
+def register() -> None:
+    """
+    Register ``reinforce`` and ``nstep_sarsa`` with rl-zoo3: algorithms, Optuna samplers and converters, default
+    YAMLs. Idempotent; it checks the installed rl-zoo3 first and changes nothing if that lacks any of them.
+
+    :raises ZooCompatibilityError: (an ``ImportError``) if the installed rl-zoo3 lacks what this patches; the
+        message names its version and the supported range
+    :raises ImportError: if rl-zoo3 is not installed
+    """
+    global _registering
+    # The start-up hook calls register() when rl_zoo3 is imported, which _zoo_targets() may be doing: that nested call
+    # leaves the work (and any error) to this one
+    if _registering:
+        return
+    _registering = True
+    try:
+        algos, samplers, converters, manager = _zoo_targets()
+    finally:
+        _registering = False
+    algos.update(ALGORITHMS)
+    samplers.update(SAMPLERS)
+    converters.update(CONVERTERS)
+    _patch_default_config(manager)
+    _patch_value_learning_rate(manager)

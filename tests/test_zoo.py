@@ -1,0 +1,594 @@
+"""
+rl-zoo3 integration (sb3_classic/zoo.py and the start-up hook _sb3_classic_zoo.py).
+
+The zoo's own commands run in subprocesses against the installed package, as rl-zoo3's tests do: no wrapper, no
+flag, the working directory a temporary one (so that the checkout is not on ``sys.path``). They train for 1000 steps
+or fewer: they check the integration, not learning. The search spaces, the YAMLs and the patches are also checked
+in-process, where that is quicker.
+"""
+
+import argparse
+import inspect
+import json
+import os
+import pickle
+import re
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import optuna
+import pytest
+import torch as th
+import yaml
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.utils import ConstantSchedule, FloatSchedule
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+from torch import nn
+
+from sb3_classic import REINFORCE, NStepSARSA
+from sb3_classic.zoo import (
+    ALGORITHMS,
+    CONVERTERS,
+    SAMPLERS,
+    SUPPORTED_RL_ZOO3,
+    ZooCompatibilityError,
+    hyperparams_path,
+    register,
+)
+
+ALGOS = list(ALGORITHMS)
+ENV_IDS = ["CartPole-v1", "Acrobot-v1"]
+# Keys of a zoo YAML entry that the zoo consumes instead of passing them to the constructor
+ZOO_KEYS = {
+    *("n_timesteps", "n_envs", "policy", "normalize", "frame_stack", "callback"),
+    *("env_wrapper", "vec_env_wrapper", "env_kwargs", "monitor_kwargs"),
+}
+# The trial parameters of each search space (what a study stores)
+COMMON_SPACE = {
+    "one_minus_gamma",
+    "lr_decay_factor",
+    "lr_decay_every",
+    "n_layers",
+    "layer_size",
+    "activation_fn",
+    "weight_init",
+}
+SEARCH_SPACES = {
+    "reinforce": COMMON_SPACE | {"learning_rate", "value_learning_rate", "n_episodes", "normalize_advantage", "ent_coef"},
+    "nstep_sarsa": COMMON_SPACE
+    | {"n_steps", "learning_rate", "train_freq", "gradient_steps", "expected_sarsa", "loss_function"}
+    | {"exploration_decay_rate", "exploration_final_eps"},
+}
+
+# One torch thread per command (the tests run two at a time on two cores); no display
+ENV = {**os.environ, "OMP_NUM_THREADS": "1", "MPLBACKEND": "Agg", "SDL_VIDEODRIVER": "dummy"}
+
+
+def run(cwd: Path, *args: str, env: dict[str, str] | None = None, check: bool = True) -> subprocess.CompletedProcess[str]:
+    """
+    Run ``python ARGS`` (the interpreter running the tests) in ``cwd``.
+
+    :param cwd: the working directory (logs are written there)
+    :param args: the interpreter's arguments, e.g. ``("-m", "rl_zoo3.train", ...)``
+    :param env: extra environment variables
+    :param check: assert that it exits with 0
+    :return: the finished process, with its output
+    """
+    result = subprocess.run(
+        [sys.executable, *args], cwd=cwd, env={**ENV, **(env or {})}, capture_output=True, text=True, timeout=300
+    )
+    if check:
+        assert result.returncode == 0, (
+            f"python {' '.join(args)} exited with {result.returncode}\n"
+            f"--- stdout ---\n{result.stdout[-4000:]}\n--- stderr ---\n{result.stderr[-4000:]}"
+        )
+    return result
+
+
+def zoo(cwd: Path, command: str, *args: str, check: bool = True) -> subprocess.CompletedProcess[str]:
+    """Run ``python -m rl_zoo3.COMMAND ARGS`` in ``cwd``; a training command must not have made runpy warn."""
+    result = run(cwd, "-m", f"rl_zoo3.{command}", *args, check=check)
+    assert "found in sys.modules" not in result.stderr, result.stderr
+    return result
+
+
+def train(cwd: Path, algo: str, env_id: str, *args: str) -> subprocess.CompletedProcess[str]:
+    """``python -m rl_zoo3.train`` for a few steps, seeded, without the default evaluation every 25k steps."""
+    return zoo(cwd, "train", "--algo", algo, "--env", env_id, "--seed", "0", "--eval-freq", "-1", *args)
+
+
+def assert_read_the_package_yaml(stdout: str, algo: str) -> None:
+    """
+    :param stdout: the output of a training command
+    :param algo: the algorithm it trained, whose YAML in the installed package it must have read
+    """
+    (path,) = re.findall(r"^Loading hyperparameters from: (.+)$", stdout, flags=re.MULTILINE)
+    # The installed copy (a wheel's), or the checkout's (an editable install)
+    assert Path(path).parts[-2:] == ("hyperparams", f"{algo}.yml"), path
+    assert "rl_zoo3" not in Path(path).parts, path
+    assert Path(path).read_text() == hyperparams_path(algo).read_text()
+
+
+def load(algo: str, path: Path) -> Any:
+    assert path.is_file(), f"{path} was not saved; the folder has {sorted(p.name for p in path.parent.iterdir())}"
+    return ALGORITHMS[algo].load(path, device="cpu")
+
+
+def yaml_entry(algo: str, env_id: str) -> dict[str, Any]:
+    entries = yaml.safe_load(hyperparams_path(algo).read_text())
+    return dict(entries.get(env_id, entries["default"]))
+
+
+def eval_policy_kwargs(policy_kwargs: Any) -> dict[str, Any]:
+    """A YAML's ``policy_kwargs`` as the zoo reads it (a string is evaluated with ``nn`` and ``th`` in scope)."""
+    return eval(policy_kwargs, {"nn": nn, "th": th}) if isinstance(policy_kwargs, str) else dict(policy_kwargs)
+
+
+def learning_rate(model: BaseAlgorithm, optimizer: th.optim.Optimizer | None = None) -> float:
+    """The learning rate ``optimizer`` (the policy's by default) was last given."""
+    return float((optimizer or model.policy.optimizer).param_groups[0]["lr"])
+
+
+def expected_decay(entry: dict[str, Any], episodes: int) -> float:
+    """The learning-rate step decay of a YAML entry after ``episodes`` completed episodes."""
+    factor = entry.get("lr_decay_factor", 1.0)
+    if "lr_decay_every" in entry:
+        return factor ** (episodes // entry["lr_decay_every"])
+    return factor ** sum(episodes >= milestone for milestone in entry.get("lr_decay_milestones", []))
+
+
+# --- Start-up hook -------------------------------------------------------------------------------------------------
+
+STARTUP_CHECK = """
+import json, sys
+heavy = ("torch", "numpy", "rl_zoo3", "sb3_classic", "stable_baselines3", "gymnasium", "optuna")
+before = {
+    "heavy": [name for name in heavy if name in sys.modules],
+    "hook": "_sb3_classic_zoo" in sys.modules,
+    "finders": sum(getattr(finder, "sb3_classic_zoo", False) for finder in sys.meta_path),
+}
+import importlib.resources
+import rl_zoo3
+import rl_zoo3.exp_manager, rl_zoo3.hyperparams_opt, rl_zoo3.utils
+after = {
+    "algos": {name: f"{cls.__module__}.{cls.__name__}" for name, cls in rl_zoo3.ALGOS.items()},
+    "same_algos": rl_zoo3.ALGOS is rl_zoo3.utils.ALGOS,
+    "samplers": sorted(rl_zoo3.hyperparams_opt.HYPERPARAMS_SAMPLER),
+    "converters": sorted(rl_zoo3.hyperparams_opt.HYPERPARAMS_CONVERTER),
+    "loader": type(rl_zoo3.__loader__).__name__,
+    "spec_loader": type(rl_zoo3.__spec__.loader).__name__,
+    "resources": importlib.resources.files("rl_zoo3").joinpath("hyperparams", "ppo.yml").is_file(),
+}
+print(json.dumps({"before": before, "after": after}))
+"""
+
+
+def test_startup_hook_imports_nothing_heavy_and_registers_with_rl_zoo3(tmp_path: Path) -> None:
+    result = run(tmp_path, "-c", STARTUP_CHECK)
+    state = json.loads(result.stdout)
+    before, after = state["before"], state["after"]
+    # The .pth ran the hook, which installed one finder and imported nothing heavy
+    assert before == {"heavy": [], "hook": True, "finders": 1}, "is the package installed (pip install -e '.[tests]')?"
+    # Importing rl_zoo3 registered both algorithms in the dict every command reads
+    assert after["algos"]["reinforce"] == "sb3_classic.reinforce.reinforce.REINFORCE"
+    assert after["algos"]["nstep_sarsa"] == "sb3_classic.sarsa.nstep_sarsa.NStepSARSA"
+    assert after["algos"]["ppo"] == "stable_baselines3.ppo.ppo.PPO"
+    assert after["same_algos"]
+    assert {"reinforce", "nstep_sarsa", "ppo"} <= set(after["samplers"]) & set(after["converters"])
+    # The real loader is put back once rl_zoo3 has executed
+    assert after["loader"] == after["spec_loader"] == "SourceFileLoader"
+    assert after["resources"]
+    assert "sb3_classic" not in result.stderr
+
+
+def test_incompatible_rl_zoo3_fails_clearly(tmp_path: Path) -> None:
+    # An rl_zoo3 3.0 without what register() patches, ahead of the installed one on sys.path
+    fake = tmp_path / "fake" / "rl_zoo3"
+    fake.mkdir(parents=True)
+    (fake / "__init__.py").write_text('__version__ = "3.0.0"\n')
+    (fake / "utils.py").write_text("ALGOS = {}\n")
+    env = {"PYTHONPATH": str(tmp_path / "fake")}
+    expected = (
+        "rl_zoo3 3.0.0: importing it failed (No module named 'rl_zoo3.hyperparams_opt'). "
+        f"sb3_classic supports rl_zoo3{SUPPORTED_RL_ZOO3}"
+    )
+
+    # The hook warns and leaves the zoo importable for its own algorithms
+    hooked = run(tmp_path, "-c", "import rl_zoo3; print(rl_zoo3.__version__)", env=env)
+    assert hooked.stdout.strip() == "3.0.0"
+    assert "RuntimeWarning" in hooked.stderr
+    assert expected in hooked.stderr
+
+    # register() itself raises, once, with a short traceback (no frames of the zoo or of importlib)
+    direct = run(tmp_path, "-c", "from sb3_classic.zoo import register; register()", env=env, check=False)
+    assert direct.returncode == 1
+    assert direct.stderr.strip().splitlines()[-1].startswith("sb3_classic.zoo.ZooCompatibilityError: ")
+    assert expected in direct.stderr
+    assert "RuntimeWarning" not in direct.stderr
+    assert "importlib" not in direct.stderr
+
+
+# --- register() in-process -----------------------------------------------------------------------------------------
+
+
+def test_register_is_idempotent() -> None:
+    import rl_zoo3
+    from rl_zoo3.exp_manager import ExperimentManager
+    from rl_zoo3.hyperparams_opt import HYPERPARAMS_CONVERTER, HYPERPARAMS_SAMPLER
+
+    # The start-up hook registered when rl_zoo3 was imported; again changes nothing
+    init, preprocess = ExperimentManager.__init__, ExperimentManager._preprocess_schedules
+    n_algos = len(rl_zoo3.ALGOS)
+    register()
+    register()
+    assert rl_zoo3.ALGOS["reinforce"] is REINFORCE
+    assert rl_zoo3.ALGOS["nstep_sarsa"] is NStepSARSA
+    assert len(rl_zoo3.ALGOS) == n_algos
+    for algo in ALGOS:
+        assert HYPERPARAMS_SAMPLER[algo] is SAMPLERS[algo]
+        assert HYPERPARAMS_CONVERTER[algo] is CONVERTERS[algo]
+    assert ExperimentManager.__init__ is init
+    assert ExperimentManager._preprocess_schedules is preprocess
+    # Each is wrapped once
+    patched: Any
+    for patched in (init, preprocess):
+        assert not hasattr(patched.__wrapped__, "__wrapped__")
+    assert "config" in inspect.signature(ExperimentManager.__init__).parameters
+
+
+def test_experiment_manager_reads_the_package_yamls_unless_conf_is_given(tmp_path: Path) -> None:
+    from rl_zoo3.exp_manager import ExperimentManager
+
+    def config(algo: str, **kwargs: Any) -> str:
+        return ExperimentManager(argparse.Namespace(), algo, "CartPole-v1", str(tmp_path), **kwargs).config
+
+    for algo in ALGOS:
+        assert config(algo) == str(hyperparams_path(algo))
+        assert config(algo, config="mine.yml") == "mine.yml"
+    assert Path(config("ppo")).parts[-3:] == ("rl_zoo3", "hyperparams", "ppo.yml")
+
+
+def test_value_learning_rate_is_read_like_learning_rate() -> None:
+    from rl_zoo3.exp_manager import ExperimentManager
+    from rl_zoo3.utils import SimpleLinearSchedule
+
+    hyperparams = ExperimentManager._preprocess_schedules({"learning_rate": 0.001, "value_learning_rate": "lin_0.02"})
+    assert isinstance(hyperparams["learning_rate"], ConstantSchedule)
+    assert isinstance(hyperparams["value_learning_rate"], SimpleLinearSchedule)
+    assert hyperparams["value_learning_rate"](1.0) == pytest.approx(0.02)
+    assert hyperparams["value_learning_rate"](0.5) == pytest.approx(0.01)
+    assert ExperimentManager._preprocess_schedules({"value_learning_rate": 0.1})["value_learning_rate"](0.0) == 0.1
+    assert "value_learning_rate" not in ExperimentManager._preprocess_schedules({"learning_rate": 0.1})
+
+
+def test_register_checks_the_zoo_before_changing_anything(monkeypatch: pytest.MonkeyPatch) -> None:
+    import rl_zoo3
+    import rl_zoo3.hyperparams_opt
+    from rl_zoo3.exp_manager import ExperimentManager
+
+    monkeypatch.delitem(rl_zoo3.ALGOS, "reinforce")
+    monkeypatch.delattr(rl_zoo3.hyperparams_opt, "HYPERPARAMS_CONVERTER")
+    with pytest.raises(ZooCompatibilityError) as error:
+        register()
+    message = str(error.value)
+    assert f"installed rl_zoo3 {rl_zoo3.__version__}" in message
+    assert "rl_zoo3.hyperparams_opt.HYPERPARAMS_CONVERTER is not a dict" in message
+    assert f"supports rl_zoo3{SUPPORTED_RL_ZOO3}" in message
+    assert "reinforce" not in rl_zoo3.ALGOS
+    monkeypatch.undo()
+
+    def old_init(self: Any, args: Any, algo: str, env_id: str) -> None: ...
+
+    monkeypatch.setattr(ExperimentManager, "__init__", old_init)
+    with pytest.raises(ZooCompatibilityError, match=r"ExperimentManager.__init__ has no 'algo' and 'config' arguments"):
+        register()
+
+
+# --- YAMLs and search spaces ---------------------------------------------------------------------------------------
+
+
+def constructor_arguments(algo: str) -> set[str]:
+    return set(inspect.signature(ALGORITHMS[algo].__init__).parameters) - {"self", "policy", "env"}
+
+
+@pytest.mark.parametrize("algo", ALGOS)
+def test_yaml_entries_are_constructor_arguments(algo: str) -> None:
+    entries = yaml.safe_load(hyperparams_path(algo).read_text())
+    assert {"default", *ENV_IDS} <= set(entries)
+    for env_id, entry in entries.items():
+        unknown = set(entry) - ZOO_KEYS - constructor_arguments(algo)
+        assert not unknown, f"{algo}.yml, {env_id}: {sorted(unknown)} are not arguments of {ALGORITHMS[algo].__name__}"
+        assert isinstance(entry["n_timesteps"], float | int), f"{algo}.yml, {env_id}: write n_timesteps as !!float"
+        kwargs = {key: value for key, value in entry.items() if key not in ZOO_KEYS}
+        if "policy_kwargs" in kwargs:
+            kwargs["policy_kwargs"] = eval_policy_kwargs(kwargs["policy_kwargs"])
+        env = env_id if env_id != "default" and env_id in gym.registry else "CartPole-v1"
+        ALGORITHMS[algo](entry["policy"], env, device="cpu", **kwargs)
+
+
+@pytest.mark.parametrize("algo", ALGOS)
+@pytest.mark.parametrize("sampler", [optuna.samplers.RandomSampler, optuna.samplers.TPESampler])
+def test_search_space(algo: str, sampler: Callable[..., optuna.samplers.BaseSampler]) -> None:
+    def objective(trial: optuna.Trial) -> float:
+        hyperparams = SAMPLERS[algo](trial, 0, 1, {})
+        # rl-zoo3 converts a stored trial with the converter: it must give the same arguments
+        assert CONVERTERS[algo](trial.params) == hyperparams
+        assert set(hyperparams) <= constructor_arguments(algo)
+        # rl-zoo3 puts them over the YAML's: they replace a decay and an ε schedule that would conflict with them
+        from_yaml: dict[str, Any] = {"lr_decay_milestones": [300, 500]}
+        if algo == "nstep_sarsa":
+            from_yaml["exploration_schedule"] = "linear"
+        model = ALGORITHMS[algo]("MlpPolicy", "CartPole-v1", device="cpu", **{**from_yaml, **hyperparams})
+        return float(sum(param.numel() for param in model.policy.parameters()))
+
+    kwargs = {"n_startup_trials": 3, "multivariate": True} if sampler is optuna.samplers.TPESampler else {}
+    study = optuna.create_study(sampler=sampler(seed=0, **kwargs))
+    study.optimize(objective, n_trials=8)
+    assert all(trial.state == optuna.trial.TrialState.COMPLETE for trial in study.trials)
+    assert {frozenset(trial.params) for trial in study.trials} == {frozenset(SEARCH_SPACES[algo])}
+
+
+# --- The zoo's commands --------------------------------------------------------------------------------------------
+
+
+# -i on CartPole only, where 1000 steps end enough episodes for the decays to show
+@pytest.mark.parametrize(("env_id", "continue_with_i"), [("CartPole-v1", True), ("Acrobot-v1", False)])
+@pytest.mark.parametrize("algo", ALGOS)
+def test_train_with_the_package_yaml(tmp_path: Path, algo: str, env_id: str, continue_with_i: bool) -> None:
+    entry = yaml_entry(algo, env_id)
+    result = train(tmp_path, algo, env_id, "-n", "1000")
+    assert_read_the_package_yaml(result.stdout, algo)
+    first = load(algo, tmp_path / "logs" / algo / f"{env_id}_1" / f"{env_id}.zip")
+    # The YAML's settings reached the model
+    for key, value in entry.items():
+        if key in ZOO_KEYS:
+            continue
+        if key == "policy_kwargs":
+            assert first.policy_kwargs == eval_policy_kwargs(value)
+        elif key.endswith("learning_rate"):
+            assert FloatSchedule(getattr(first, key))(1.0) == pytest.approx(value), key
+        else:
+            assert getattr(first, key) == value, key
+    assert first.num_timesteps >= 1000
+    if not continue_with_i:
+        return
+
+    # -i: the training state goes on (episode count, updates, and the ε and learning-rate decays that follow them)
+    trained_agent = f"logs/{algo}/{env_id}_1/{env_id}.zip"
+    result = train(tmp_path, algo, env_id, "-n", "500", "-i", trained_agent)
+    assert "Loading pretrained agent" in result.stdout
+    second = load(algo, tmp_path / "logs" / algo / f"{env_id}_2" / f"{env_id}.zip")
+    assert second._completed_episodes > first._completed_episodes > 0
+    assert second._n_updates > first._n_updates > 0
+    episodes = second._completed_episodes
+    assert learning_rate(second) == pytest.approx(entry["learning_rate"] * expected_decay(entry, episodes))
+    if algo == "reinforce":
+        value_lr = entry["value_learning_rate"] * expected_decay(entry, episodes)
+        assert learning_rate(second, second.policy.value_optimizer) == pytest.approx(value_lr)
+    else:
+        assert second.exploration_schedule == "exponential"
+        epsilon = second.exploration_initial_eps * second.exploration_decay_rate**episodes
+        assert second.exploration_rate == pytest.approx(max(second.exploration_final_eps, epsilon))
+        assert second.exploration_rate < first.exploration_rate
+
+
+def test_rl_zoo3_console_script(tmp_path: Path) -> None:
+    script = Path(sys.executable).parent / "rl_zoo3"
+    assert script.is_file(), f"rl_zoo3's console script is not beside {sys.executable}"
+    args = ["train", "--algo", "nstep_sarsa", "--env", "Acrobot-v1", "-n", "500", "--eval-freq", "-1"]
+    result = subprocess.run([str(script), *args], cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr[-4000:]
+    assert_read_the_package_yaml(result.stdout, "nstep_sarsa")
+    assert load("nstep_sarsa", tmp_path / "logs" / "nstep_sarsa" / "Acrobot-v1_1" / "Acrobot-v1.zip").n_steps == 5
+
+
+# A matplotlib backend for plot_train: plt.show() saves the figures, and what their curves hold
+SAVING_BACKEND = """
+import json, os
+from matplotlib._pylab_helpers import Gcf
+from matplotlib.backends.backend_agg import FigureCanvasAgg as FigureCanvas
+
+
+def show(*args, **kwargs):
+    figures = []
+    for manager in Gcf.get_all_fig_managers():
+        figure = manager.canvas.figure
+        figure.savefig(os.path.join(os.environ["PLOT_DIR"], f"figure_{manager.num}.png"))
+        lines = [line for axes in figure.axes for line in axes.get_lines()]
+        figures.append({line.get_label(): len(line.get_xdata()) for line in lines})
+    with open(os.path.join(os.environ["PLOT_DIR"], "figures.json"), "w") as file:
+        json.dump(figures, file)
+"""
+
+
+# Each plotting command runs once, on one algorithm's logs (they read the logs whatever the algorithm)
+@pytest.mark.parametrize(("algo", "plot"), [("reinforce", "plot_train"), ("nstep_sarsa", "all_plots")])
+def test_workflow(tmp_path: Path, algo: str, plot: str) -> None:
+    """Train with TensorBoard, a progress bar, evaluations and checkpoints; plot; enjoy; record a video."""
+    result = zoo(
+        tmp_path,
+        "train",
+        *("--algo", algo, "--env", "CartPole-v1", "-n", "1000", "--seed", "0"),
+        *("--tensorboard-log", "runs", "-P", "--log-interval", "5"),
+        *("--eval-freq", "250", "--eval-episodes", "2", "--save-freq", "500"),
+    )
+    assert "━" in result.stdout, "no progress bar"
+    run_dir = tmp_path / "logs" / algo / "CartPole-v1_1"
+    evaluations = np.load(run_dir / "evaluations.npz")
+    assert list(evaluations["timesteps"][:4]) == [250, 500, 750, 1000]
+    assert evaluations["results"].shape[1] == 2
+    assert (run_dir / "best_model.zip").is_file()
+    assert (run_dir / "rl_model_500_steps.zip").is_file()
+
+    # TensorBoard: the algorithm's own scalars, and the evaluations
+    (tb_dir,) = (tmp_path / "runs" / "CartPole-v1").iterdir()
+    assert tb_dir.name == f"{ALGORITHMS[algo].__name__}_1"
+    assert list(tb_dir.glob("events.out.tfevents.*"))
+    scalars = set(EventAccumulator(str(tb_dir)).Reload().Tags()["scalars"])
+    own = {"reinforce": {"train/value_learning_rate", "train/policy_loss"}, "nstep_sarsa": {"rollout/exploration_rate"}}
+    assert {"train/learning_rate", "rollout/ep_rew_mean", "eval/mean_reward", *own[algo]} <= scalars, sorted(scalars)
+
+    if plot == "plot_train":
+        # SAVING_BACKEND saves the figure that plt.show() would display
+        (tmp_path / "saving_backend.py").write_text(SAVING_BACKEND)
+        plot_env = {"MPLBACKEND": "module://saving_backend", "PYTHONPATH": str(tmp_path), "PLOT_DIR": str(tmp_path)}
+        run(tmp_path, "-m", "rl_zoo3.plots.plot_train", "-a", algo, "-e", "CartPole-v1", "-f", "logs", "-w", "5", env=plot_env)
+        (figure,) = json.loads((tmp_path / "figures.json").read_text())
+        assert figure.get("CartPole-v1_1", 0) > 0, figure
+        assert (tmp_path / "figure_1.png").stat().st_size > 0
+    else:
+        run(
+            tmp_path,
+            "-m",
+            "rl_zoo3.plots.all_plots",
+            "-a",
+            algo,
+            "-e",
+            "CartPole-v1",
+            "-f",
+            "logs",
+            "--no-display",
+            "-o",
+            "all",
+        )
+        with (tmp_path / "all.pkl").open("rb") as file:
+            results = pickle.load(file)["CartPole-v1"][f"{algo.upper()}-logs"]
+        np.testing.assert_array_equal(results["timesteps"][:4], [250, 500, 750, 1000])
+
+    # enjoy (the best model for one algorithm, a checkpoint for the other) and record_video (the final model)
+    load_flags = ["--load-best"] if algo == "reinforce" else ["--load-checkpoint", "500"]
+    enjoy_args = ["--algo", algo, "--env", "CartPole-v1", "-f", "logs", "--no-render", "-n", "1000", *load_flags]
+    enjoy = zoo(tmp_path, "enjoy", *enjoy_args, check=False)
+    assert enjoy.returncode == 0, enjoy.stderr[-4000:]
+    assert "Episode Reward" in enjoy.stdout
+    pytest.importorskip("moviepy", reason="record_video writes its video with moviepy")
+    zoo(tmp_path, "record_video", "--algo", algo, "--env", "CartPole-v1", "-f", "logs", "-n", "100", "-o", "videos")
+    (video,) = (tmp_path / "videos").glob("*.mp4")
+    assert video.name.startswith(f"final-model-{algo}-CartPole-v1")
+    assert video.stat().st_size > 1000
+
+
+PARAMS: dict[str, dict[str, Any]] = {
+    "reinforce": {
+        "n_episodes": 3,
+        "learning_rate": 0.01,
+        "lr_decay_every": None,
+        "value_learning_rate": "lin_0.02",
+        "lr_decay_milestones": [5, 10],
+        "lr_decay_factor": 0.5,
+        "normalize_advantage": True,
+        "policy_kwargs": "dict(net_arch=dict(pi=[16], vf=[8]), activation_fn=nn.ELU)",
+    },
+    "nstep_sarsa": {
+        "n_steps": 7,
+        "learning_rate": 0.01,
+        "train_freq": 4,
+        "expected_sarsa": True,
+        "exploration_schedule": "linear",
+        "exploration_fraction": 0.5,
+        "lr_decay_every": None,
+        "lr_decay_milestones": [5, 10],
+        "policy_kwargs": "dict(net_arch=[16], weight_init='orthogonal')",
+    },
+}
+
+
+# SubprocVecEnv starts an interpreter per env: once is enough
+@pytest.mark.parametrize(("algo", "vec_env"), [("reinforce", "subproc"), ("nstep_sarsa", "dummy")])
+def test_params_override_the_yaml(tmp_path: Path, algo: str, vec_env: str) -> None:
+    params = {"n_envs": 2, **PARAMS[algo]}
+    # -params values are Python expressions: strings are quoted, except policy_kwargs, which the zoo evaluates itself
+    args = [
+        f"{key}:{value!r}" if isinstance(value, str) and key != "policy_kwargs" else f"{key}:{value}"
+        for key, value in params.items()
+    ]
+    result = train(tmp_path, algo, "CartPole-v1", "-n", "1000", "--vec-env", vec_env, "-params", *args)
+    assert "Using 2 environments" in result.stdout
+    run_dir = tmp_path / "logs" / algo / "CartPole-v1_1"
+    assert (run_dir / "0.monitor.csv").is_file()
+    assert (run_dir / "1.monitor.csv").is_file()
+    args_yml = yaml.load((run_dir / "CartPole-v1" / "args.yml").read_text(), Loader=yaml.UnsafeLoader)
+    assert args_yml["vec_env"] == vec_env
+    model = load(algo, run_dir / "CartPole-v1.zip")
+    assert model.n_envs == 2
+    for key, value in params.items():
+        if key == "n_envs":
+            continue
+        if key == "policy_kwargs":
+            assert model.policy_kwargs == eval_policy_kwargs(value)
+        elif key == "value_learning_rate":
+            assert model.value_learning_rate(1.0) == pytest.approx(0.02)
+            assert model.value_learning_rate(0.5) == pytest.approx(0.01)
+        elif key == "learning_rate":
+            assert model.learning_rate(1.0) == value
+        else:
+            assert getattr(model, key) == value, key
+
+
+def test_conf_file_replaces_the_package_yaml(tmp_path: Path) -> None:
+    conf = tmp_path / "mine.yml"
+    entry = {"n_timesteps": 1000, "policy": "MlpPolicy", "n_steps": 2, "train_freq": 8, "exploration_decay_rate": 0.5}
+    entry["policy_kwargs"] = "dict(net_arch=[8, 8])"
+    conf.write_text(yaml.safe_dump({"CartPole-v1": entry}))
+    result = train(tmp_path, "nstep_sarsa", "CartPole-v1", "-conf", str(conf), "-params", "exploration_final_eps:0.2")
+    assert f"Loading hyperparameters from: {conf}" in result.stdout
+    model = load("nstep_sarsa", tmp_path / "logs" / "nstep_sarsa" / "CartPole-v1_1" / "CartPole-v1.zip")
+    assert (model.n_steps, model.train_freq, model.exploration_decay_rate) == (2, 8, 0.5)
+    assert model.policy_kwargs == {"net_arch": [8, 8]}
+    assert model.num_timesteps >= 1000
+    # ε decayed to the floor that -params set, the rest is the package's default (no lr decay)
+    assert model.exploration_rate == 0.2
+    assert model.lr_decay_every is None
+    assert model.lr_decay_milestones is None
+
+
+@pytest.mark.parametrize(("algo", "storage"), [("reinforce", "study.db"), ("nstep_sarsa", "study.log")])
+def test_optimize(tmp_path: Path, algo: str, storage: str) -> None:
+    """Two trials with each of the random and TPE samplers, the median pruner, in one study in a shared storage."""
+    url = f"sqlite:///{tmp_path / storage}" if storage.endswith(".db") else str(tmp_path / storage)
+    common = ["-n", "500", "-optimize", "--n-trials", "2", "--n-startup-trials", "2", "--pruner", "median"]
+    common += ["--n-evaluations", "2", "--eval-episodes", "1", "--no-optim-plots", "--storage", url, "--study-name", "s"]
+    for sampler in ("random", "tpe"):
+        result = zoo(tmp_path, "train", "--algo", algo, "--env", "CartPole-v1", "--seed", "0", *common, "--sampler", sampler)
+        # A trial that raised (a sampled argument the algorithm rejects) is printed and pruned
+        assert "Sampled hyperparams" not in result.stdout, result.stdout[-4000:]
+    reports = (tmp_path / "logs" / algo).glob("report_CartPole-v1_2-trials-500-*-median_*.csv")
+    assert sorted(report.name.split("-")[4] for report in reports) == ["random", "tpe"]
+
+    backend = optuna.storages.journal.JournalFileBackend(url) if storage.endswith(".log") else None  # type: ignore[attr-defined]
+    study = optuna.load_study(study_name="s", storage=optuna.storages.JournalStorage(backend) if backend else url)
+    states = [trial.state for trial in study.trials]
+    assert len(states) == 4
+    assert set(states) <= {optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.PRUNED}
+    # The median pruner prunes nothing before its 2 startup trials
+    assert states[:2] == [optuna.trial.TrialState.COMPLETE] * 2
+    assert all(set(trial.params) == SEARCH_SPACES[algo] for trial in study.trials)
+
+
+@pytest.mark.parametrize("algo", ALGOS)
+def test_train_with_a_stored_trial(tmp_path: Path, algo: str) -> None:
+    """``--storage ... --study-name ... --trial-id N``: the converter turns the trial's parameters into arguments."""
+    url = f"sqlite:///{tmp_path / 'study.db'}"
+    study = optuna.create_study(storage=url, study_name="s", sampler=optuna.samplers.RandomSampler(seed=1))
+    study.optimize(lambda trial: float(len(SAMPLERS[algo](trial, 0, 1, {}))), n_trials=2)
+    params = study.trials[1].params
+
+    result = train(tmp_path, algo, "CartPole-v1", "-n", "500", "--storage", url, "--study-name", "s", "--trial-id", "1")
+    assert "Loading from Optuna study..." in result.stdout
+    model = load(algo, tmp_path / "logs" / algo / "CartPole-v1_1" / "CartPole-v1.zip")
+    assert model.gamma == pytest.approx(1 - params["one_minus_gamma"])
+    assert model.learning_rate(1.0) == pytest.approx(params["learning_rate"])
+    assert model.policy_kwargs["net_arch"] == [params["layer_size"]] * params["n_layers"]
+    assert model.policy_kwargs["weight_init"] == params["weight_init"]
+    assert (model.lr_decay_factor, model.lr_decay_every) == (params["lr_decay_factor"], params["lr_decay_every"])
+    if algo == "reinforce":
+        assert model.n_episodes == params["n_episodes"]
+        assert model.value_learning_rate(1.0) == pytest.approx(params["value_learning_rate"])
+    else:
+        assert (model.n_steps, model.train_freq) == (params["n_steps"], params["train_freq"])
+        assert model.exploration_decay_rate == params["exploration_decay_rate"]
