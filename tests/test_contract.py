@@ -115,6 +115,18 @@ def test_save_load_restores_everything_and_training_continues_exactly(model_clas
 
 
 @pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_load_takes_what_sb3_and_the_zoo_pass(model_class: type[Any], tmp_path: Path) -> None:
+    make_model(model_class, seed=0).learn(300).save(tmp_path / "model.zip")
+    # rl-zoo3's enjoy and record_video load with a zero learning rate
+    frozen = model_class.load(tmp_path / "model.zip", custom_objects={"learning_rate": 0.0, "lr_schedule": 0.0})
+    assert frozen.predict(observations(), deterministic=True)[0].shape == (20,)
+    # rl-zoo3's -i passes hyperparameters again, None included
+    loaded = model_class.load(tmp_path / "model.zip", env=make_vec_env("CartPole-v1"), max_grad_norm=None)
+    loaded.learn(300)
+    assert loaded._n_updates > frozen._n_updates
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
 def test_get_and_set_parameters(model_class: type[BaseAlgorithm]) -> None:
     trained = make_model(model_class, seed=0).learn(500)
     fresh = make_model(model_class, seed=1)

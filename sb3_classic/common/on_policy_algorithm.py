@@ -135,7 +135,10 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         return f"{type(self).__name__} supports {names} action spaces, not {self.action_space}"
 
     def _check_arguments(self) -> None:
-        """Raise a ValueError naming the argument for anything invalid; subclasses extend it."""
+        """
+        Raise a ValueError naming the argument for anything invalid; subclasses extend it and call it at the end of
+        their constructor. (Not on ``load()``: rl-zoo3's ``enjoy`` loads with ``learning_rate=0.0``, as SB3 allows.)
+        """
         check_learning_rate("learning_rate", self.learning_rate)
         check_range("gamma", self.gamma, 0.0, 1.0, hint="0.99 is the usual choice")
         if not self.max_grad_norm > 0:
@@ -161,7 +164,6 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         return 1024
 
     def _setup_model(self) -> None:
-        self._check_arguments()
         self._setup_lr_schedule()
         self.lr_decay = StepDecay(self.lr_decay_factor, self.lr_decay_every, self.lr_decay_milestones)
         self.set_random_seed(self.seed)
@@ -192,7 +194,8 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
             self.logger.record(key, learning_rate)
 
     def _clip_gradients(self, parameters: Any) -> None:
-        if math.isfinite(self.max_grad_norm):
+        # None (e.g. passed to load()) means no clipping, as inf does
+        if self.max_grad_norm is not None and math.isfinite(self.max_grad_norm):
             th.nn.utils.clip_grad_norm_(parameters, self.max_grad_norm)
 
     @abstractmethod

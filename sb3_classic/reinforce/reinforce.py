@@ -134,6 +134,7 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         self.gamma_t_factor = gamma_t_factor
         self.normalize_advantage = normalize_advantage
         self.ent_coef = ent_coef
+        self._check_arguments()
         if _init_setup_model:
             self._setup_model()
 

@@ -148,6 +148,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self.loss_function = loss_function
         # ε of the ε-greedy behaviour policy (SB3's DQN name); follows exploration_schedule
         self.exploration_rate = exploration_initial_eps
+        self._check_arguments()
         if _init_setup_model:
             self._setup_model()
 
