@@ -164,10 +164,7 @@ def convert_nstep_sarsa_params(sampled_params: dict[str, Any]) -> dict[str, Any]
     :param sampled_params: the trial's parameters (``trial.params``)
     :return: keyword arguments of ``NStepSARSA``
     """
-    hyperparams = _convert_common(sampled_params)
-    # The sampled ε decay is per episode
-    hyperparams["exploration_schedule"] = "exponential"
-    return hyperparams
+    return _convert_common(sampled_params)
 
 
 def sample_nstep_sarsa_params(
@@ -175,8 +172,8 @@ def sample_nstep_sarsa_params(
 ) -> dict[str, Any]:
     """
     Optuna search space of n-step SARSA (rl-zoo3's ``-optimize``): n, learning rate, steps and gradient steps per
-    update, γ, Expected SARSA or not, the exponential ε decay (rate and floor), the loss, learning-rate step decay,
-    and the Q-network's depth, width, activation and initialisation.
+    update, γ, Expected SARSA or not, the ε schedule (exponential per episode or linear, and its floor), the loss,
+    learning-rate step decay, and the Q-network's depth, width, activation and initialisation.
 
     :param trial: the Optuna trial to sample from
     :param n_actions: size of a Box action space (unused)
@@ -189,11 +186,14 @@ def sample_nstep_sarsa_params(
         "n_steps": trial.suggest_categorical("n_steps", (1, 2, 3, 5, 10, 20)),
         "learning_rate": trial.suggest_float("learning_rate", 1e-5, 1e-2, log=True),
         "train_freq": trial.suggest_categorical("train_freq", (1, 4, 8, 16, 32, 64)),
-        "gradient_steps": trial.suggest_categorical("gradient_steps", (1, 2, 4)),
+        "gradient_steps": trial.suggest_categorical("gradient_steps", (1, 2, 4, 8, 16)),
         "one_minus_gamma": trial.suggest_float("one_minus_gamma", 1e-4, 0.03, log=True),
         "expected_sarsa": trial.suggest_categorical("expected_sarsa", (False, True)),
-        # ε ← max(ε_final, ε · rate) per episode
+        # ε ← max(ε_final, ε · rate) per episode, or linear over a fraction of training; both are sampled (without
+        # conditional parameters, multivariate TPE samples jointly) and the schedule not chosen ignores its own
+        "exploration_schedule": trial.suggest_categorical("exploration_schedule", ("exponential", "linear")),
         "exploration_decay_rate": trial.suggest_categorical("exploration_decay_rate", (0.9, 0.95, 0.98, 0.99, 0.995, 0.999)),
+        "exploration_fraction": trial.suggest_categorical("exploration_fraction", (0.05, 0.1, 0.2, 0.4)),
         "exploration_final_eps": trial.suggest_float("exploration_final_eps", 0.0, 0.2),
         "loss_function": trial.suggest_categorical("loss_function", ("mse", "huber")),
         **_suggest_lr_decay(trial),

@@ -62,7 +62,7 @@ SEARCH_SPACES = {
     "reinforce": COMMON_SPACE | {"learning_rate", "value_learning_rate", "n_episodes", "normalize_advantage", "ent_coef"},
     "nstep_sarsa": COMMON_SPACE
     | {"n_steps", "learning_rate", "train_freq", "gradient_steps", "expected_sarsa", "loss_function"}
-    | {"exploration_decay_rate", "exploration_final_eps"},
+    | {"exploration_schedule", "exploration_decay_rate", "exploration_fraction", "exploration_final_eps"},
 }
 
 # One torch thread per command (the tests run two at a time on two cores); no display
@@ -319,10 +319,8 @@ def test_search_space(algo: str, sampler: Callable[..., optuna.samplers.BaseSamp
         # rl-zoo3 converts a stored trial with the converter: it must give the same arguments
         assert CONVERTERS[algo](trial.params) == hyperparams
         assert set(hyperparams) <= constructor_arguments(algo)
-        # rl-zoo3 puts them over the YAML's: they replace a decay and an ε schedule that would conflict with them
+        # rl-zoo3 puts them over the YAML's: they replace a decay that would conflict with them
         from_yaml: dict[str, Any] = {"lr_decay_milestones": [300, 500]}
-        if algo == "nstep_sarsa":
-            from_yaml["exploration_schedule"] = "linear"
         model = ALGORITHMS[algo]("MlpPolicy", "CartPole-v1", device="cpu", **{**from_yaml, **hyperparams})
         return float(sum(param.numel() for param in model.policy.parameters()))
 
