@@ -134,6 +134,13 @@ def learning_rate(model: BaseAlgorithm, optimizer: th.optim.Optimizer | None = N
     return float((optimizer or model.policy.optimizer).param_groups[0]["lr"])
 
 
+def scheduled(value: float | str, progress_remaining: float) -> float:
+    """A YAML learning rate (a number, or the zoo's ``lin_<initial>``) at ``progress_remaining``."""
+    if isinstance(value, str) and value.startswith("lin_"):
+        return float(value.removeprefix("lin_")) * progress_remaining
+    return float(value)
+
+
 def expected_decay(entry: dict[str, Any], episodes: int) -> float:
     """The learning-rate step decay of a YAML entry after ``episodes`` completed episodes."""
     factor = entry.get("lr_decay_factor", 1.0)
@@ -298,6 +305,8 @@ def constructor_arguments(algo: str) -> set[str]:
 
 @pytest.mark.parametrize("algo", ALGOS)
 def test_yaml_entries_are_constructor_arguments(algo: str) -> None:
+    from rl_zoo3.utils import linear_schedule
+
     entries = yaml.safe_load(hyperparams_path(algo).read_text())
     assert {"default", *ENV_IDS} <= set(entries)
     for env_id, entry in entries.items():
@@ -307,6 +316,10 @@ def test_yaml_entries_are_constructor_arguments(algo: str) -> None:
         kwargs = {key: value for key, value in entry.items() if key not in ZOO_KEYS}
         if "policy_kwargs" in kwargs:
             kwargs["policy_kwargs"] = eval_policy_kwargs(kwargs["policy_kwargs"])
+        for key in ("learning_rate", "value_learning_rate"):
+            if isinstance(kwargs.get(key), str):
+                assert kwargs[key].startswith("lin_"), f"{algo}.yml, {env_id}: {key} is a number or lin_<number>"
+                kwargs[key] = linear_schedule(float(kwargs[key].removeprefix("lin_")))
         env = env_id if env_id != "default" and env_id in gym.registry else "CartPole-v1"
         ALGORITHMS[algo](entry["policy"], env, device="cpu", **kwargs)
 
@@ -349,7 +362,8 @@ def test_train_with_the_package_yaml(tmp_path: Path, algo: str, env_id: str, con
         if key == "policy_kwargs":
             assert first.policy_kwargs == eval_policy_kwargs(value)
         elif key.endswith("learning_rate"):
-            assert FloatSchedule(getattr(first, key))(1.0) == pytest.approx(value), key
+            schedule = FloatSchedule(getattr(first, key))
+            assert [schedule(1.0), schedule(0.5)] == pytest.approx([scheduled(value, 1.0), scheduled(value, 0.5)]), key
         else:
             assert getattr(first, key) == value, key
     assert first.num_timesteps >= 1000
@@ -364,9 +378,11 @@ def test_train_with_the_package_yaml(tmp_path: Path, algo: str, env_id: str, con
     assert second._completed_episodes > first._completed_episodes > 0
     assert second._n_updates > first._n_updates > 0
     episodes = second._completed_episodes
-    assert learning_rate(second) == pytest.approx(entry["learning_rate"] * expected_decay(entry, episodes))
+    # A lin_ learning rate follows the second run's progress, as it does for the zoo's own algorithms
+    progress, decay = second._current_progress_remaining, expected_decay(entry, episodes)
+    assert learning_rate(second) == pytest.approx(scheduled(entry["learning_rate"], progress) * decay)
     if algo == "reinforce":
-        value_lr = entry["value_learning_rate"] * expected_decay(entry, episodes)
+        value_lr = scheduled(entry["value_learning_rate"], progress) * decay
         assert learning_rate(second, second.policy.value_optimizer) == pytest.approx(value_lr)
     else:
         assert second.exploration_schedule == "exponential"
@@ -382,7 +398,9 @@ def test_rl_zoo3_console_script(tmp_path: Path) -> None:
     result = subprocess.run([str(script), *args], cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr[-4000:]
     assert_read_the_package_yaml(result.stdout, "nstep_sarsa")
-    assert load("nstep_sarsa", tmp_path / "logs" / "nstep_sarsa" / "Acrobot-v1_1" / "Acrobot-v1.zip").n_steps == 5
+    model = load("nstep_sarsa", tmp_path / "logs" / "nstep_sarsa" / "Acrobot-v1_1" / "Acrobot-v1.zip")
+    entry = yaml_entry("nstep_sarsa", "Acrobot-v1")
+    assert (model.expected_sarsa, model.policy_kwargs) == (entry["expected_sarsa"], eval_policy_kwargs(entry["policy_kwargs"]))
 
 
 # A matplotlib backend for plot_train: plt.show() saves the figures, and what their curves hold
@@ -418,10 +436,13 @@ def test_workflow(tmp_path: Path, algo: str, plot: str) -> None:
     assert "━" in result.stdout, "no progress bar"
     run_dir = tmp_path / "logs" / algo / "CartPole-v1_1"
     evaluations = np.load(run_dir / "evaluations.npz")
-    assert list(evaluations["timesteps"][:4]) == [250, 500, 750, 1000]
+    # The zoo counts --eval-freq and --save-freq in calls of all n_envs envs
+    n_envs = yaml_entry(algo, "CartPole-v1").get("n_envs", 1)
+    eval_steps, save_steps = 250 // n_envs * n_envs, 500 // n_envs * n_envs
+    assert list(evaluations["timesteps"][:4]) == [eval_steps * k for k in (1, 2, 3, 4)]
     assert evaluations["results"].shape[1] == 2
     assert (run_dir / "best_model.zip").is_file()
-    assert (run_dir / "rl_model_500_steps.zip").is_file()
+    assert (run_dir / f"rl_model_{save_steps}_steps.zip").is_file()
 
     # TensorBoard: the algorithm's own scalars, and the evaluations
     (tb_dir,) = (tmp_path / "runs" / "CartPole-v1").iterdir()
@@ -456,10 +477,10 @@ def test_workflow(tmp_path: Path, algo: str, plot: str) -> None:
         )
         with (tmp_path / "all.pkl").open("rb") as file:
             results = pickle.load(file)["CartPole-v1"][f"{algo.upper()}-logs"]
-        np.testing.assert_array_equal(results["timesteps"][:4], [250, 500, 750, 1000])
+        np.testing.assert_array_equal(results["timesteps"][:4], [eval_steps * k for k in (1, 2, 3, 4)])
 
     # enjoy (the best model for one algorithm, a checkpoint for the other) and record_video (the final model)
-    load_flags = ["--load-best"] if algo == "reinforce" else ["--load-checkpoint", "500"]
+    load_flags = ["--load-best"] if algo == "reinforce" else ["--load-checkpoint", str(save_steps)]
     enjoy_args = ["--algo", algo, "--env", "CartPole-v1", "-f", "logs", "--no-render", "-n", "1000", *load_flags]
     enjoy = zoo(tmp_path, "enjoy", *enjoy_args, check=False)
     assert enjoy.returncode == 0, enjoy.stderr[-4000:]
