@@ -29,10 +29,11 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     action the agent actually took, with no bootstrap past a termination: w ← w + α[G_{t:t+n} − q̂(S_t, A_t, w)]
     ∇q̂(S_t, A_t, w) (eq. 10.5). The gradient does not flow through the target (semi-gradient).
 
-    Updates are batched: every ``train_freq`` steps per env, one gradient step (or ``gradient_steps``) on the mean
-    loss of every transition whose target has become known. A transition whose n steps are not all taken yet waits
-    for a later update, so every target is a full n-step return, whatever ``train_freq`` is; ``train_freq=1`` with one
-    env and ``learning_rate`` used by SGD is the book's per-step algorithm.
+    Updates are batched: every ``train_freq`` steps per env, ``gradient_steps`` gradient steps on the mean loss of
+    every transition whose target has become known. A transition whose n steps are not all taken yet waits for a later
+    update, so every target is a full n-step return, whatever ``train_freq`` is; ``train_freq=1, gradient_steps=1``
+    with one env and plain SGD (``policy_kwargs=dict(optimizer_class=th.optim.SGD)``) is the book's per-step
+    algorithm.
 
     At a time-limit truncation the target bootstraps from the final state with the expectation of q̂ under the
     current ε-greedy policy, (1 − ε) max_a q̂ + ε mean_a q̂: no action is taken there, and the expectation is the
