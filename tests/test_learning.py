@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import torch as th
 import yaml
-from rl_zoo3.utils import linear_schedule
+from rl_zoo3.exp_manager import ExperimentManager
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
@@ -36,9 +36,8 @@ def zoo_hyperparams(algo: str, env_id: str) -> tuple[dict[str, Any], int]:
     hyperparams = dict(yaml.safe_load((HYPERPARAMS / f"{algo}.yml").read_text())[env_id])
     assert "normalize" not in hyperparams, "VecNormalize is not applied here"
     hyperparams.pop("policy")
-    for key in ("learning_rate", "value_learning_rate"):
-        if isinstance(hyperparams.get(key), str) and hyperparams[key].startswith("lin_"):
-            hyperparams[key] = linear_schedule(float(hyperparams[key].removeprefix("lin_")))
+    # The zoo's own parsing of learning rates (with sb3_classic.zoo's value_learning_rate)
+    hyperparams = ExperimentManager._preprocess_schedules(hyperparams)
     if isinstance(hyperparams.get("policy_kwargs"), str):
         hyperparams["policy_kwargs"] = eval(hyperparams["policy_kwargs"], {"nn": nn, "th": th})
     return hyperparams, hyperparams.pop("n_envs", 1)
