@@ -4,12 +4,18 @@ from typing import Any
 
 import torch as th
 from gymnasium import spaces
-from stable_baselines3.common.policies import ActorCriticPolicy
+from stable_baselines3.common.distributions import CategoricalDistribution
+from stable_baselines3.common.policies import ActorCriticPolicy, BaseModel
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, CombinedExtractor, FlattenExtractor, NatureCNN
-from stable_baselines3.common.type_aliases import Schedule
+from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from torch import nn
 
-from sb3_classic.common.torch_layers import check_weight_init, kaiming_init, make_activation
+from sb3_classic.common.torch_layers import (
+    check_weight_init,
+    kaiming_init,
+    make_activation,
+    optimizer_kwargs_with_defaults,
+)
 
 
 class REINFORCEPolicy(ActorCriticPolicy):
@@ -36,6 +42,8 @@ class REINFORCEPolicy(ActorCriticPolicy):
     :param normalize_images: whether to divide images by 255
     :param optimizer_class: optimizer of both networks, ``th.optim.Adam`` by default
     :param optimizer_kwargs: additional keyword arguments, excluding the learning rate, to pass to both optimizers
+        (Adam and AdamW get ``fused=True``, PyTorch's one-kernel implementation of the same update, unless these
+        choose ``fused`` or ``foreach``)
     """
 
     def __init__(
@@ -87,8 +95,26 @@ class REINFORCEPolicy(ActorCriticPolicy):
         value_ids = {id(param) for param in value_parameters}
         policy_parameters = [param for param in self.parameters() if id(param) not in value_ids]
         value_lr_schedule = value_lr_schedule or lr_schedule
-        self.optimizer = self.optimizer_class(policy_parameters, lr=lr_schedule(1), **self.optimizer_kwargs)  # type: ignore[call-arg]
-        self.value_optimizer = self.optimizer_class(value_parameters, lr=value_lr_schedule(1), **self.optimizer_kwargs)  # type: ignore[call-arg]
+        optimizer_kwargs = optimizer_kwargs_with_defaults(self.optimizer_class, self.optimizer_kwargs)
+        self.optimizer = self.optimizer_class(policy_parameters, lr=lr_schedule(1), **optimizer_kwargs)  # type: ignore[call-arg]
+        self.value_optimizer = self.optimizer_class(value_parameters, lr=value_lr_schedule(1), **optimizer_kwargs)  # type: ignore[call-arg]
+
+    def sample_actions(self, obs: PyTorchObs) -> th.Tensor:
+        """
+        A ~ π(·|obs, θ), the behaviour policy of the rollout loop. For Discrete actions this is the draw
+        ``CategoricalDistribution.sample()`` makes (the same ``multinomial`` call on the soft-max of the logits),
+        without building a ``torch.distributions`` object at every env step, which is most of the per-step cost
+        of SB3's ``get_distribution``; other action spaces use SB3's distributions.
+
+        :param obs: the observations of all envs
+        :return: one action per env
+        """
+        if not isinstance(self.action_dist, CategoricalDistribution):
+            return self.get_distribution(obs).get_actions()
+        features = BaseModel.extract_features(self, obs, self.pi_features_extractor)
+        logits = self.action_net(self.mlp_extractor.forward_actor(features))
+        # π(a|s, θ) = soft-max of the action preferences h(s, a, θ) (S&B eq. 13.2)
+        return th.multinomial(th.softmax(logits, dim=-1), 1, replacement=True).squeeze(-1)
 
     @property
     def value_parameters(self) -> list[nn.Parameter]:

@@ -156,7 +156,7 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
 
     def _sample_actions(self, obs: th.Tensor | dict[str, th.Tensor]) -> np.ndarray:
         # A ~ π(·|S, θ); the baseline v̂ is only needed at update time
-        return self.policy.get_distribution(obs).get_actions().cpu().numpy()
+        return self.policy.sample_actions(obs).cpu().numpy()
 
     def _rollout_complete(self, n_steps: int, n_episodes: int) -> bool:
         return n_episodes >= self.n_episodes

@@ -11,7 +11,12 @@ from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from stable_baselines3.dqn.policies import QNetwork
 from torch import nn
 
-from sb3_classic.common.torch_layers import check_weight_init, kaiming_init, make_activation
+from sb3_classic.common.torch_layers import (
+    check_weight_init,
+    kaiming_init,
+    make_activation,
+    optimizer_kwargs_with_defaults,
+)
 
 
 class SARSAPolicy(BasePolicy):
@@ -34,6 +39,8 @@ class SARSAPolicy(BasePolicy):
     :param normalize_images: whether to divide images by 255
     :param optimizer_class: the optimizer to use, ``th.optim.Adam`` by default
     :param optimizer_kwargs: additional keyword arguments, excluding the learning rate, to pass to the optimizer
+        (Adam and AdamW get ``fused=True``, PyTorch's one-kernel implementation of the same update, unless these
+        choose ``fused`` or ``foreach``)
     """
 
     action_space: spaces.Discrete
@@ -88,7 +95,8 @@ class SARSAPolicy(BasePolicy):
             for module in hidden:
                 module.apply(lambda layer: self.init_weights(layer, gain=np.sqrt(2)))
             output.apply(lambda layer: self.init_weights(layer, gain=1.0))
-        self.optimizer = self.optimizer_class(self.q_net.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)  # type: ignore[call-arg]
+        optimizer_kwargs = optimizer_kwargs_with_defaults(self.optimizer_class, self.optimizer_kwargs)
+        self.optimizer = self.optimizer_class(self.q_net.parameters(), lr=lr_schedule(1), **optimizer_kwargs)  # type: ignore[call-arg]
 
     def forward(self, obs: PyTorchObs, deterministic: bool = True) -> th.Tensor:
         """:return: the greedy actions argmax_a q̂(obs, a)"""

@@ -1,0 +1,96 @@
+"""The policies' speed paths: fused Adam by default, and REINFORCE's sampler of the rollout loop."""
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from stable_baselines3.common.envs import IdentityEnvBox, SimpleMultiObsEnv
+
+from sb3_classic import REINFORCE, NStepSARSA
+from sb3_classic.common.torch_layers import optimizer_kwargs_with_defaults
+
+MODEL_LIST = [REINFORCE, NStepSARSA]
+
+
+def observation_batch(space: gym.spaces.Space, n: int) -> np.ndarray | dict[str, np.ndarray]:
+    space.seed(0)
+    samples = [space.sample() for _ in range(n)]
+    if isinstance(space, gym.spaces.Dict):
+        return {key: np.stack([sample[key] for sample in samples]) for key in space.spaces}
+    return np.stack(samples)
+
+
+def optimizers(model: REINFORCE | NStepSARSA) -> list[th.optim.Optimizer]:
+    if isinstance(model, REINFORCE):
+        return [model.policy.optimizer, model.policy.value_optimizer]
+    return [model.policy.optimizer]
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_adam_is_fused_unless_the_user_chooses(model_class: type[Any]) -> None:
+    model = model_class("MlpPolicy", "CartPole-v1", device="cpu")
+    assert [optimizer.defaults["fused"] for optimizer in optimizers(model)] == [True] * len(optimizers(model))
+    # The policy keeps (and saves) the arguments as given; the default is applied when building the optimizers
+    assert "fused" not in model.policy.optimizer_kwargs
+
+    chosen = model_class("MlpPolicy", "CartPole-v1", device="cpu", policy_kwargs=dict(optimizer_kwargs=dict(foreach=True)))
+    for optimizer in optimizers(chosen):
+        assert optimizer.defaults["foreach"] is True
+        assert not optimizer.defaults["fused"]
+    sgd = model_class("MlpPolicy", "CartPole-v1", device="cpu", policy_kwargs=dict(optimizer_class=th.optim.SGD))
+    for optimizer in optimizers(sgd):
+        assert isinstance(optimizer, th.optim.SGD)
+        assert not optimizer.defaults["fused"]
+
+
+@pytest.mark.parametrize("optimizer_class", [th.optim.Adam, th.optim.AdamW])
+def test_fused_adam_takes_the_same_steps(optimizer_class: type[th.optim.Adam]) -> None:
+    th.manual_seed(0)
+    nets = [th.nn.Linear(6, 3), th.nn.Linear(6, 3)]
+    nets[1].load_state_dict(nets[0].state_dict())
+    initial = nets[0].weight.detach().clone()
+    built = [
+        optimizer_class(nets[0].parameters(), lr=1e-2, **optimizer_kwargs_with_defaults(optimizer_class, None)),
+        optimizer_class(nets[1].parameters(), lr=1e-2, foreach=False),
+    ]
+    assert built[0].defaults["fused"] is True
+    inputs = th.randn(32, 6)
+    for _ in range(20):
+        for net, optimizer in zip(nets, built, strict=True):
+            optimizer.zero_grad()
+            (net(inputs) ** 2).mean().backward()
+            optimizer.step()
+    for fused, looped in zip(nets[0].parameters(), nets[1].parameters(), strict=True):
+        th.testing.assert_close(fused, looped, rtol=1e-5, atol=1e-6)
+    # The steps moved the weights (the comparison is not of two untouched networks)
+    assert (nets[0].weight - initial).abs().max() > 1e-2
+
+
+@pytest.mark.parametrize(
+    ("env", "policy", "policy_kwargs"),
+    [
+        (lambda: gym.make("Acrobot-v1"), "MlpPolicy", {}),
+        (lambda: gym.make("Acrobot-v1"), "MlpPolicy", dict(share_features_extractor=True)),
+        (lambda: SimpleMultiObsEnv(random_start=True), "MultiInputPolicy", {}),
+        (lambda: IdentityEnvBox(ep_length=20), "MlpPolicy", {}),
+    ],
+)
+def test_reinforce_samples_as_sb3_distributions_do(env: Any, policy: str, policy_kwargs: dict[str, Any]) -> None:
+    model = REINFORCE(policy, env(), policy_kwargs=policy_kwargs, seed=0, device="cpu")
+    # A trained-looking policy: logits far from uniform, so that a wrong probability shows in the draws
+    with th.no_grad():
+        for parameter in model.policy.action_net.parameters():
+            parameter.mul_(20.0)
+    obs, _ = model.policy.obs_to_tensor(observation_batch(model.observation_space, 64))
+    draws = set()
+    for seed in range(50):
+        with th.no_grad():
+            th.manual_seed(seed)
+            ours = model.policy.sample_actions(obs)
+            th.manual_seed(seed)
+            sb3 = model.policy.get_distribution(obs).get_actions()
+        assert th.equal(ours, sb3)
+        draws.add(ours.numpy().tobytes())
+    assert len(draws) > 1  # random, not the greedy action
