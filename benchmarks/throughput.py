@@ -1,21 +1,23 @@
 """
 Throughput of ``learn()``: env steps per second of REINFORCE and NStepSARSA divided by A2C's, on the same env with
-the same network size, measured in one process, interleaved and repeated so that the machine's noise cancels.
+the same network size, measured in one process, interleaved and repeated so that the machine's noise cancels; and
+where each ``learn()`` spends its time (the envs' ``step``, ``train()``, and the rest of the rollout loop).
 
 Run it alone with ``python -m benchmarks.throughput`` (``python -m benchmarks.run`` runs it after the learning runs).
 """
 
 import argparse
+import functools
 import shlex
 import sys
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import dataclass
 from io import StringIO
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import pandas as pd
 import torch as th
@@ -23,6 +25,7 @@ from rich.console import Console
 from rich.progress import Progress
 from rl_zoo3.exp_manager import ExperimentManager
 from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 
 from benchmarks.common import (
     DEFAULT_RESULTS_DIR,
@@ -41,6 +44,8 @@ BASELINE = "a2c"
 NET_ARCH = [64, 64]
 #: The issue's target: at least this many times A2C's env steps per second
 TARGET_RATIO = 1.5
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -97,18 +102,40 @@ def build_model(algo: str, env_id: str, n_envs: int, seed: int, log_folder: Path
     return setup[0]
 
 
+def timed(function: Callable[..., T], timers: dict[str, float], key: str) -> Callable[..., T]:
+    """:return: ``function``, adding the seconds each call takes to ``timers[key]``"""
+
+    @functools.wraps(function)
+    def wrapper(*args: Any, **kwargs: Any) -> T:
+        start = time.perf_counter()
+        try:
+            return function(*args, **kwargs)
+        finally:
+            timers[key] += time.perf_counter() - start
+
+    return wrapper
+
+
 def measure(algo: str, env_id: str, n_envs: int, steps: int, seed: int, log_folder: Path) -> dict[str, Any]:
     """
-    Time ``learn(steps)`` of a new model (its construction is not timed).
+    Time ``learn(steps)`` of a new model (its construction is not timed), and the parts of it spent in the envs'
+    ``step`` and in ``train()``.
 
-    :return: the measurement: ``algo``, ``env_id``, ``n_envs``, ``seed``, ``steps`` (taken), ``seconds``, ``steps_per_s``
+    :return: the measurement: ``algo``, ``env_id``, ``n_envs``, ``seed``, ``steps`` (taken), ``seconds``, ``env_s``,
+        ``train_s``, ``steps_per_s``
     """
     model = build_model(algo, env_id, n_envs, seed, log_folder)
+    env = model.env
+    assert env is not None
+    assert isinstance(model, OnPolicyAlgorithm)
+    timers = {"env_s": 0.0, "train_s": 0.0}
+    # Every on-policy loop steps self.env, and learn() calls self.train
+    env.step = timed(env.step, timers, "env_s")  # type: ignore[method-assign]
+    model.train = timed(model.train, timers, "train_s")  # type: ignore[method-assign]
     start = time.perf_counter()
     model.learn(steps)
     seconds = time.perf_counter() - start
-    assert model.env is not None
-    model.env.close()
+    env.close()
     return {
         "algo": algo,
         "env_id": env_id,
@@ -116,6 +143,7 @@ def measure(algo: str, env_id: str, n_envs: int, steps: int, seed: int, log_fold
         "seed": seed,
         "steps": model.num_timesteps,
         "seconds": seconds,
+        **timers,
         "steps_per_s": model.num_timesteps / seconds,
     }
 
@@ -195,6 +223,34 @@ def throughput_table(measurements: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def time_breakdown_table(measurements: pd.DataFrame) -> pd.DataFrame:
+    """
+    :param measurements: ``run_throughput``'s rows
+    :return: one row per env, number of envs and algorithm: the seconds of ``learn()`` per 10,000 env steps, and of
+        them in the envs' ``step``, in ``train()`` and in the rest of the rollout loop (choosing actions, storing
+        them, callbacks), median over repeats
+    """
+    per_10k = 10_000 / measurements["steps"]
+    parts = pd.DataFrame(
+        {
+            "learn": measurements["seconds"] * per_10k,
+            "env": measurements["env_s"] * per_10k,
+            "train": measurements["train_s"] * per_10k,
+            "rest": (measurements["seconds"] - measurements["env_s"] - measurements["train_s"]) * per_10k,
+        }
+    )
+    keys = [measurements["env_id"], measurements["n_envs"], measurements["algo"]]
+    medians = parts.groupby(keys, sort=False).median()
+    rows = []
+    for (env_id, n_envs, algo), seconds in medians.iterrows():
+        row: dict[str, Any] = {"Env": env_id, "n_envs": n_envs, "Algorithm": LABELS[algo]}
+        row["learn() s"] = f"{seconds['learn']:.3f}"
+        for part, label in (("env", "env.step"), ("train", "train()"), ("rest", "rest of the loop")):
+            row[f"{label} s"] = f"{seconds[part]:.3f} ({seconds[part] / seconds['learn']:.0%})"
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
 def throughput_header(command: str, settings: ThroughputSettings) -> str:
     """:return: the markdown above the throughput table: the command and the settings"""
     versions = ", ".join(f"{name} {version}" for name, version in code_versions("reinforce").items())
@@ -210,16 +266,27 @@ def throughput_header(command: str, settings: ThroughputSettings) -> str:
     )
 
 
+BREAKDOWN_HEADER = """## Where the time goes
+
+The same `learn()` calls, timed in parts: seconds per 10,000 env steps in the envs' `step` (the env itself and the
+VecEnv, which copies observations and deep-copies infos: the same for every algorithm), in `train()`, and the rest of
+the rollout loop (choosing the actions, storing them, the callbacks). Medians over repeats, so the parts need not add
+up to the whole exactly; percentages of the median `learn()`."""
+
+
 def write_throughput_report(measurements: pd.DataFrame, header: str, results_dir: Path) -> Path:
     """
-    Write ``throughput.md`` (header and table) and ``throughput.csv`` (every measurement).
+    Write ``throughput.md`` (header, ratios and time breakdown) and ``throughput.csv`` (every measurement).
 
     :return: the markdown file
     """
     results_dir.mkdir(parents=True, exist_ok=True)
     measurements.to_csv(results_dir / "throughput.csv", index=False, float_format="%.6g")
     path = results_dir / "throughput.md"
-    path.write_text(f"{header}\n\n{markdown_table(throughput_table(measurements))}\n")
+    path.write_text(
+        f"{header}\n\n{markdown_table(throughput_table(measurements))}\n\n"
+        f"{BREAKDOWN_HEADER}\n\n{markdown_table(time_breakdown_table(measurements))}\n"
+    )
     return path
 
 

@@ -1,4 +1,4 @@
-"""The benchmark harness's own logic: threshold crossings, episode counts, cache keys, budgets, ratios, one real run."""
+"""The benchmark harness's own logic: threshold crossings, episode counts, cache keys, budgets, throughput, hot paths."""
 
 import dataclasses
 import json
@@ -10,12 +10,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from benchmarks import runner
-from benchmarks.common import REPO_ROOT, RunSpec, code_versions
+from benchmarks import hot_paths, runner
+from benchmarks.common import REPO_ROOT, RunSpec, code_versions, register_algorithms
 from benchmarks.report import Results, episode_curves, episodes_by, first_crossing, summary_table, threshold_crossings
 from benchmarks.run import FULL, QUICK, make_specs, parse_budgets
 from benchmarks.runner import RUN_FILE, episodes_from_monitors, run_one
-from benchmarks.throughput import throughput_ratios, throughput_table
+from benchmarks.throughput import measure, throughput_ratios, throughput_table, time_breakdown_table
+from sb3_classic import NStepSARSA
 
 SPEC = RunSpec(
     algo="reinforce",
@@ -195,6 +196,55 @@ def test_throughput_ratios_pair_each_repeat() -> None:
     assert table.loc[0, "REINFORCE / A2C"] == "3.50× (3.00–4.00)"
     assert table.loc[0, "REINFORCE ≥ 1.5×"] == "yes"
     assert table.loc[0, "NStepSARSA ≥ 1.5×"] == "no"
+
+
+def test_time_breakdown_is_per_10k_steps_and_the_rest_is_what_env_and_train_leave() -> None:
+    rows = [
+        {"env_id": "Acrobot-v1", "n_envs": 8, "repeat": repeat, "algo": "nstep_sarsa", "steps": steps, **times}
+        for repeat, steps, times in [
+            (0, 20_000, {"seconds": 2.0, "env_s": 1.0, "train_s": 0.6}),
+            (1, 20_000, {"seconds": 2.2, "env_s": 1.2, "train_s": 0.8}),
+            (2, 20_000, {"seconds": 9.0, "env_s": 1.1, "train_s": 0.7}),  # a stall of the machine: the median holds
+        ]
+    ]
+    table = time_breakdown_table(pd.DataFrame(rows))
+    assert len(table) == 1
+    row = table.iloc[0]
+    assert row["Algorithm"] == "NStepSARSA"
+    assert row["learn() s"] == "1.100"  # the median 2.2 s per 20k steps
+    assert row["env.step s"] == "0.550 (50%)"
+    assert row["train() s"] == "0.350 (32%)"
+    assert row["rest of the loop s"] == "0.200 (18%)"  # median of 0.2, 0.1 and 3.6 s per 10k
+
+
+@pytest.mark.parametrize("algo", ["a2c", "nstep_sarsa"])
+def test_measure_times_the_envs_and_train_inside_learn(algo: str, tmp_path: Path) -> None:
+    register_algorithms()
+    result = measure(algo, "CartPole-v1", 2, 400, 0, tmp_path)
+    assert result["steps"] >= 400
+    assert 0 < result["env_s"] < result["seconds"]
+    assert 0 < result["train_s"] < result["seconds"]
+    assert result["env_s"] + result["train_s"] < result["seconds"]
+
+
+def test_hot_paths_variants_are_what_they_say() -> None:
+    implementations = {}
+    for name, kwargs in hot_paths.ADAM_VARIANTS.items():
+        model = NStepSARSA("MlpPolicy", "CartPole-v1", policy_kwargs=dict(optimizer_kwargs=kwargs), device="cpu")
+        defaults = model.policy.optimizer.defaults
+        implementations[name] = "fused" if defaults["fused"] else "foreach" if defaults["foreach"] else "loop"
+    assert list(implementations.values()) == ["loop", "foreach", "fused"]
+    assert "default" in next(name for name, implementation in implementations.items() if implementation == "fused")
+
+
+def test_hot_paths_command_line(tmp_path: Path) -> None:
+    hot_paths.main(["--quick", "--envs", "CartPole-v1", "--results-dir", str(tmp_path)])
+    lines = (tmp_path / "hot_paths.md").read_text().splitlines()
+    rows = [line.split(" | ") for line in lines if line.startswith("| ") and "CartPole-v1" in line]
+    # 3 Adam implementations, then SB3's and REINFORCE's sampling for 1 and for 8 envs
+    assert len(rows) == len(hot_paths.ADAM_VARIANTS) + 4
+    assert [row[-1] for row in rows if row[2].startswith(("Adam, loop", "SB3"))] == ["1.00× |"] * 3
+    assert all(float(row[3]) > 0 for row in rows)
 
 
 def test_run_one_trains_once_and_caches(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -1,0 +1,159 @@
+"""
+Microbenchmarks of the two hot paths where sb3_classic departs from SB3's and PyTorch's defaults, so that a reader
+can re-run the numbers behind those choices on their own machine:
+
+- **NStepSARSA's gradient step** (forward, loss, backward and Adam step of a 64×64 Q-network on 128 transitions, the
+  batch of the tuned settings on 8 envs; ``NStepSARSA.train`` takes 8 per update) with each Adam implementation:
+  the loop over parameter tensors (PyTorch's default on CPU), ``foreach`` and ``fused`` (sb3_classic's default);
+- **REINFORCE's action sampling** in the rollout loop, for 1 and 8 envs: SB3's ``get_distribution(obs).get_actions()``
+  against ``REINFORCEPolicy.sample_actions`` (the same draw, without building a ``torch.distributions`` object).
+
+Timed with ``torch.utils.benchmark`` (one thread, CPU).
+
+    python -m benchmarks.hot_paths
+"""
+
+import argparse
+import shlex
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import torch as th
+import torch.nn.functional as F
+from rich.console import Console
+from torch.utils.benchmark import Timer
+
+from benchmarks.common import DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR, code_versions
+from benchmarks.report import markdown_table
+from benchmarks.throughput import NET_ARCH
+from sb3_classic import REINFORCE, NStepSARSA
+
+#: The Adam implementations compared, as the ``optimizer_kwargs`` that choose them (sb3_classic's default: none)
+ADAM_VARIANTS = {
+    "Adam, loop over tensors (PyTorch's CPU default)": dict(foreach=False),
+    "Adam, foreach": dict(foreach=True),
+    "Adam, fused (sb3_classic's default)": {},
+}
+#: Transitions per update of the tuned NStepSARSA settings: train_freq 16 × 8 envs
+BATCH_SIZE = 128
+HEADER = f"""Median µs per call (`torch.utils.benchmark`, 1 thread, CPU), networks `net_arch={NET_ARCH}`.
+
+- *NStepSARSA gradient step*: forward, loss, backward and Adam step of the Q-network on {BATCH_SIZE} transitions (the
+  batch of the tuned settings on 8 envs; `NStepSARSA.train` takes 8 per update), with each Adam implementation.
+- *REINFORCE action sampling*: the actions of the rollout loop, with SB3's `get_distribution(obs).get_actions()` and
+  with `REINFORCEPolicy.sample_actions(obs)`, which makes the same draw.
+
+Speed-up: the first variant of each path divided by this one."""
+
+
+def time_call(function: Callable[[], Any], min_run_time: float) -> float:
+    """:return: the median time of a call of ``function``, in µs"""
+    timer = Timer("function()", globals={"function": function}, num_threads=1)
+    return timer.blocked_autorange(min_run_time=min_run_time).median * 1e6
+
+
+def sarsa_gradient_step(env_id: str, optimizer_kwargs: dict[str, Any]) -> Callable[[], None]:
+    """
+    :return: one gradient step of ``NStepSARSA.train`` on a fixed batch, with an NStepSARSA built with
+        ``optimizer_kwargs``
+    """
+    policy_kwargs = dict(net_arch=NET_ARCH, optimizer_kwargs=optimizer_kwargs)
+    model = NStepSARSA("MlpPolicy", env_id, policy_kwargs=policy_kwargs, seed=0, device="cpu")
+    q_net, optimizer = model.policy.q_net, model.policy.optimizer
+    space = model.observation_space
+    space.seed(0)
+    observations = th.as_tensor(np.stack([space.sample() for _ in range(BATCH_SIZE)]))
+    actions = th.randint(int(model.action_space.n), (BATCH_SIZE, 1))
+    targets = th.randn(BATCH_SIZE)
+
+    def step() -> None:
+        q_predicted = q_net(observations).gather(1, actions).flatten()
+        loss = 0.5 * F.mse_loss(q_predicted, targets)
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+
+    return step
+
+
+def reinforce_samplers(env_id: str, n_envs: int) -> dict[str, Callable[[], th.Tensor]]:
+    """:return: SB3's sampling and REINFORCE's, of the actions of ``n_envs`` observations, without gradient"""
+    model = REINFORCE("MlpPolicy", env_id, policy_kwargs=dict(net_arch=NET_ARCH), seed=0, device="cpu")
+    space = model.observation_space
+    space.seed(0)
+    observations = th.as_tensor(np.stack([space.sample() for _ in range(n_envs)]))
+    policy = model.policy
+
+    @th.no_grad()
+    def sb3() -> th.Tensor:
+        return policy.get_distribution(observations).get_actions()
+
+    @th.no_grad()
+    def ours() -> th.Tensor:
+        return policy.sample_actions(observations)
+
+    return {"SB3: get_distribution(obs).get_actions()": sb3, "REINFORCEPolicy.sample_actions(obs)": ours}
+
+
+def run_hot_paths(env_ids: Sequence[str], min_run_time: float) -> pd.DataFrame:
+    """
+    :param env_ids: the envs whose spaces size the networks
+    :param min_run_time: seconds to time each variant for (at least)
+    :return: one row per path, env and variant: ``path``, ``env_id``, ``variant``, ``us`` (median µs per call) and
+        ``speedup`` (the first variant of the path's time divided by this one's)
+    """
+    th.set_num_threads(1)
+    rows = []
+    for env_id in env_ids:
+        steps = {name: sarsa_gradient_step(env_id, kwargs) for name, kwargs in ADAM_VARIANTS.items()}
+        paths: dict[str, dict[str, Callable[[], Any]]] = {"NStepSARSA gradient step": steps}
+        for n_envs in (1, 8):
+            paths[f"REINFORCE action sampling, {n_envs} env{'s' * (n_envs > 1)}"] = reinforce_samplers(env_id, n_envs)
+        for path, variants in paths.items():
+            baseline = None
+            for variant, function in variants.items():
+                micros = time_call(function, min_run_time)
+                if baseline is None:
+                    baseline = micros
+                rows.append({"path": path, "env_id": env_id, "variant": variant, "us": micros, "speedup": baseline / micros})
+    return pd.DataFrame(rows)
+
+
+def hot_paths_table(measurements: pd.DataFrame) -> pd.DataFrame:
+    """:return: ``run_hot_paths``'s rows, formatted"""
+    return pd.DataFrame(
+        {
+            "Path": measurements["path"],
+            "Env": measurements["env_id"],
+            "Variant": measurements["variant"],
+            "µs per call": measurements["us"].map("{:.1f}".format),
+            "Speed-up": measurements["speedup"].map("{:.2f}×".format),
+        }
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    """The command line: ``python -m benchmarks.hot_paths [--quick] [--envs ...] [--results-dir DIR]``."""
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="time each variant briefly, into the scratch folder")
+    parser.add_argument("--envs", nargs="+", default=list(ENV_IDS), choices=ENV_IDS, help="envs to size the networks")
+    parser.add_argument("--results-dir", type=Path, help=f"where to write (default {DEFAULT_RESULTS_DIR})")
+    args = parser.parse_args(argv)
+    results_dir: Path = args.results_dir or (QUICK_RESULTS_DIR if args.quick else DEFAULT_RESULTS_DIR)
+    command = shlex.join(["python", "-m", "benchmarks.hot_paths", *(sys.argv[1:] if argv is None else argv)])
+    measurements = run_hot_paths(args.envs, min_run_time=0.05 if args.quick else 2.0)
+    versions = ", ".join(f"{name} {version}" for name, version in code_versions("reinforce").items())
+    table = markdown_table(hot_paths_table(measurements))
+    results_dir.mkdir(parents=True, exist_ok=True)
+    path = results_dir / "hot_paths.md"
+    path.write_text(f"# Hot paths\n\nProduced by:\n\n```\n{command}\n```\n\n{HEADER}\n\nVersions: {versions}.\n\n{table}\n")
+    Console().print(table, soft_wrap=True, markup=False)
+    Console().print(f"Wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
