@@ -25,6 +25,7 @@ import pandas as pd
 import torch as th
 import torch.nn.functional as F
 from rich.console import Console
+from stable_baselines3.common.base_class import BaseAlgorithm
 from torch.utils.benchmark import Timer
 
 from benchmarks.common import DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR, code_versions
@@ -56,6 +57,13 @@ def time_call(function: Callable[[], Any], min_run_time: float) -> float:
     return timer.blocked_autorange(min_run_time=min_run_time).median * 1e6
 
 
+def observation_batch(model: BaseAlgorithm, n: int) -> th.Tensor:
+    """:return: ``n`` observations sampled (seeded) from ``model``'s observation space"""
+    space = model.observation_space
+    space.seed(0)
+    return th.as_tensor(np.stack([space.sample() for _ in range(n)]))
+
+
 def sarsa_gradient_step(env_id: str, optimizer_kwargs: dict[str, Any]) -> Callable[[], None]:
     """
     :return: one gradient step of ``NStepSARSA.train`` on a fixed batch, with an NStepSARSA built with
@@ -64,9 +72,7 @@ def sarsa_gradient_step(env_id: str, optimizer_kwargs: dict[str, Any]) -> Callab
     policy_kwargs = dict(net_arch=NET_ARCH, optimizer_kwargs=optimizer_kwargs)
     model = NStepSARSA("MlpPolicy", env_id, policy_kwargs=policy_kwargs, seed=0, device="cpu")
     q_net, optimizer = model.policy.q_net, model.policy.optimizer
-    space = model.observation_space
-    space.seed(0)
-    observations = th.as_tensor(np.stack([space.sample() for _ in range(BATCH_SIZE)]))
+    observations = observation_batch(model, BATCH_SIZE)
     actions = th.randint(int(model.action_space.n), (BATCH_SIZE, 1))
     targets = th.randn(BATCH_SIZE)
 
@@ -83,10 +89,7 @@ def sarsa_gradient_step(env_id: str, optimizer_kwargs: dict[str, Any]) -> Callab
 def reinforce_samplers(env_id: str, n_envs: int) -> dict[str, Callable[[], th.Tensor]]:
     """:return: SB3's sampling and REINFORCE's, of the actions of ``n_envs`` observations, without gradient"""
     model = REINFORCE("MlpPolicy", env_id, policy_kwargs=dict(net_arch=NET_ARCH), seed=0, device="cpu")
-    space = model.observation_space
-    space.seed(0)
-    observations = th.as_tensor(np.stack([space.sample() for _ in range(n_envs)]))
-    policy = model.policy
+    observations, policy = observation_batch(model, n_envs), model.policy
 
     @th.no_grad()
     def sb3() -> th.Tensor:

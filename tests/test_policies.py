@@ -1,5 +1,6 @@
 """The policies' speed paths: fused Adam by default, and REINFORCE's sampler of the rollout loop."""
 
+from operator import attrgetter
 from typing import Any
 
 import gymnasium as gym
@@ -23,9 +24,8 @@ def observation_batch(space: gym.spaces.Space, n: int) -> np.ndarray | dict[str,
 
 
 def optimizers(model: REINFORCE | NStepSARSA) -> list[th.optim.Optimizer]:
-    if isinstance(model, REINFORCE):
-        return [model.policy.optimizer, model.policy.value_optimizer]
-    return [model.policy.optimizer]
+    """Every optimizer the model saves (the same list save/load relies on)."""
+    return [attrgetter(name)(model) for name in model._get_torch_save_params()[0] if name.endswith("optimizer")]
 
 
 @pytest.mark.parametrize("model_class", MODEL_LIST)
