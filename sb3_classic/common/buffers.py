@@ -49,6 +49,32 @@ def select(observations: Observations, index: Any) -> Observations:
     return observations[index]
 
 
+def all_finite(observations: Observations) -> bool:
+    """
+    :param observations: a batch of observations (an array, or a dict of arrays)
+    :return: whether every entry is finite (integer arrays, e.g. images, always are)
+    """
+    if isinstance(observations, dict):
+        return all(all_finite(obs) for obs in observations.values())
+    return observations.dtype.kind not in "fc" or bool(np.isfinite(observations).all())
+
+
+def non_finite_entries(values: Observations) -> tuple[int, str | None, float]:
+    """
+    :param values: a batch (first axis: envs), an array or a dict of arrays, with a non-finite entry
+    :return: the row (env) of the first non-finite entry, its key in a dict (None for an array), and its value
+    """
+    arrays = values.items() if isinstance(values, dict) else [(None, values)]
+    for key, array in arrays:
+        array = np.asarray(array)
+        if array.dtype.kind in "fc":
+            bad = ~np.isfinite(array.reshape(len(array), -1))
+            if bad.any():
+                row = int(bad.any(axis=1).argmax())
+                return row, key, float(array.reshape(len(array), -1)[row][bad[row]][0])
+    raise ValueError("no non-finite entry")
+
+
 def _allocate(space: spaces.Space, shape: tuple[int, ...]) -> Observations:
     if isinstance(space, spaces.Dict):
         return {key: _allocate(subspace, shape) for key, subspace in space.spaces.items()}  # type: ignore[misc]

@@ -10,6 +10,7 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, Combine
 from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from torch import nn
 
+from sb3_classic.common.policies import EnvActionsMixin
 from sb3_classic.common.torch_layers import (
     check_weight_init,
     kaiming_init,
@@ -18,12 +19,13 @@ from sb3_classic.common.torch_layers import (
 )
 
 
-class REINFORCEPolicy(ActorCriticPolicy):
+class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
     """
     The two networks of REINFORCE with baseline (Sutton & Barto §13.4): the policy π(a|s, θ) and the baseline
     v̂(s, w). They are separate networks by default (``net_arch=dict(pi=[64, 64], vf=[64, 64])``, no shared
     features extractor) with separate optimizers, so each has its own learning rate (α^θ and α^w).
-    The action distributions are SB3's (Discrete, Box, MultiDiscrete, MultiBinary).
+    The action distributions are SB3's (Discrete, Box, MultiDiscrete, MultiBinary); the networks work with action
+    indices and ``predict`` returns the env's values (``start`` of ``Discrete``/``MultiDiscrete`` added).
 
     :param observation_space: observation space
     :param action_space: action space

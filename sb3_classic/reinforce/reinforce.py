@@ -245,7 +245,7 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         self: SelfREINFORCE,
         total_timesteps: int,
         callback: MaybeCallback = None,
-        log_interval: int = 10,
+        log_interval: int = 4,
         tb_log_name: str = "REINFORCE",
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,
@@ -255,7 +255,9 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
 
         :param total_timesteps: env steps to train for, all envs together
         :param callback: callback(s) called at every step with the state of the algorithm
-        :param log_interval: updates between two logger dumps
+        :param log_interval: updates between two logger dumps (each update takes at least ``n_episodes`` episodes;
+            the default, 4, is SB3's DQN's 4 episodes); whatever was recorded since the last dump is dumped when
+            ``learn()`` returns
         :param tb_log_name: the name of the run for TensorBoard logging
         :param reset_num_timesteps: whether to reset ``num_timesteps`` (and the envs); the learning-rate decay
             counts keep going either way

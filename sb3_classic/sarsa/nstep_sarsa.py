@@ -204,12 +204,18 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         super()._on_episodes_end(n_episodes)
         self._update_exploration_rate()
 
-    def _epsilon_greedy(self, greedy_actions: np.ndarray) -> np.ndarray:
-        # With probability ε, an action drawn uniformly from all actions (S&B §2.2), for each env independently
+    def _epsilon_greedy(self, greedy_actions: np.ndarray, first_action: int = 0) -> np.ndarray:
+        """
+        :param greedy_actions: the greedy actions, one per observation
+        :param first_action: the value of the first action (0 for indices, the space's ``start`` for env values)
+        :return: ε-greedy actions: with probability ε an action drawn uniformly from all actions (S&B §2.2),
+            for each observation independently
+        """
         explore = np.random.random(greedy_actions.shape) < self.exploration_rate
         if not explore.any():
             return greedy_actions
-        return np.where(explore, np.random.randint(self.action_space.n, size=greedy_actions.shape), greedy_actions)
+        uniform = np.random.randint(first_action, first_action + self.action_space.n, size=greedy_actions.shape)
+        return np.where(explore, uniform, greedy_actions)
 
     def _sample_actions(self, obs: th.Tensor | dict[str, th.Tensor]) -> np.ndarray:
         return self._epsilon_greedy(self.policy.q_net(obs).argmax(dim=1).cpu().numpy())
@@ -225,7 +231,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         deterministic: bool = False,
     ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
         """
-        The greedy action (``deterministic=True``), or the ε-greedy one with the current ``exploration_rate``.
+        The greedy action (``deterministic=True``), or the ε-greedy one with the current ``exploration_rate``, as the
+        env takes it (an index plus the ``start`` of a ``Discrete(n, start=...)`` space).
 
         :param observation: the input observation (one, or a batch)
         :param state: unused (no recurrent policy)
@@ -233,8 +240,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         :param deterministic: greedy if True, ε-greedy otherwise
         :return: the actions, and the unchanged state
         """
+        # In the env's action values (the space's start added), as the ε-greedy draw
         actions, state = self.policy.predict(observation, state, episode_start, deterministic=True)
-        return (actions if deterministic else self._epsilon_greedy(actions)), state
+        return (actions if deterministic else self._epsilon_greedy(actions, int(self.action_space.start))), state
 
     def _bootstrap_values(self, q_values: th.Tensor) -> np.ndarray:
         """
@@ -317,7 +325,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self: SelfNStepSARSA,
         total_timesteps: int,
         callback: MaybeCallback = None,
-        log_interval: int = 100,
+        log_interval: int = 8,
         tb_log_name: str = "NStepSARSA",
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,
@@ -327,7 +335,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
 
         :param total_timesteps: env steps to train for, all envs together
         :param callback: callback(s) called at every step with the state of the algorithm
-        :param log_interval: updates between two logger dumps
+        :param log_interval: updates between two logger dumps (the default, 8 updates, is 128 steps per env with the
+            default ``train_freq``: a curve in TensorBoard from the first thousand steps on); whatever was recorded
+            since the last dump is dumped when ``learn()`` returns
         :param tb_log_name: the name of the run for TensorBoard logging
         :param reset_num_timesteps: whether to reset ``num_timesteps`` (and the envs); the exponential ε decay and the
             learning-rate decay counts keep going either way, a linear ε decay restarts (as SB3's DQN)

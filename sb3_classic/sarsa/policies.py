@@ -11,6 +11,7 @@ from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from stable_baselines3.dqn.policies import QNetwork
 from torch import nn
 
+from sb3_classic.common.policies import EnvActionsMixin
 from sb3_classic.common.torch_layers import (
     check_weight_init,
     kaiming_init,
@@ -19,11 +20,12 @@ from sb3_classic.common.torch_layers import (
 )
 
 
-class SARSAPolicy(BasePolicy):
+class SARSAPolicy(EnvActionsMixin, BasePolicy):
     """
     The action-value network q̂(s, a, w) of semi-gradient SARSA (Sutton & Barto §10.1–10.2), with its optimizer.
     It is SB3's DQN ``QNetwork`` without a target network: SARSA bootstraps from the online network.
-    ``predict`` is greedy; the ε-greedy behaviour policy lives in ``NStepSARSA``, as ε is training state.
+    ``predict`` is greedy, in the env's action values (``start`` of the ``Discrete`` space added; q̂'s outputs are
+    indexed from 0); the ε-greedy behaviour policy lives in ``NStepSARSA``, as ε is training state.
 
     :param observation_space: observation space
     :param action_space: action space (Discrete)

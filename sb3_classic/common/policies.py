@@ -1,0 +1,58 @@
+"""
+What both algorithms' policies share: acting in the env's own action values.
+
+Gymnasium's ``Discrete(n, start=s)`` holds the actions s, …, s + n − 1 and ``MultiDiscrete(nvec, start=...)`` offsets
+each dimension. The networks, the buffer and the losses work with indices 0, …, n − 1 (an index selects a logit or a
+Q-value); everything that hands an action to an env or to the user adds the space's ``start``: the rollout loop,
+``predict`` (and so SB3's ``evaluate_policy``, ``EvalCallback`` and the zoo's ``enjoy``) and ε-greedy draws. SB3's own
+policies do not (they assume ``start=0``), hence this module.
+"""
+
+import numpy as np
+from gymnasium import spaces
+from stable_baselines3.common.policies import BasePolicy
+
+
+def action_offset(action_space: spaces.Space) -> np.ndarray | None:
+    """
+    :param action_space: an action space
+    :return: the env's action value of index 0 (``start`` of a ``Discrete`` or ``MultiDiscrete`` space, scalar or
+        shape (n_dims,), int64), or None where there is no offset (a zero ``start``, or any other space)
+    """
+    if isinstance(action_space, (spaces.Discrete, spaces.MultiDiscrete)):
+        start = np.asarray(action_space.start, dtype=np.int64)
+        if start.any():
+            return start
+    return None
+
+
+class EnvActionsMixin:
+    """
+    Makes a policy's ``predict`` return the env's action values: index + ``start`` for ``Discrete`` and
+    ``MultiDiscrete`` spaces with an offset (see the module docstring); other spaces are unchanged.
+    Put it before the SB3 policy class in the bases.
+    """
+
+    action_space: spaces.Space
+
+    def predict(
+        self,
+        observation: np.ndarray | dict[str, np.ndarray],
+        state: tuple[np.ndarray, ...] | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = False,
+    ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
+        """
+        SB3's ``BasePolicy.predict``, in the env's action values.
+
+        :param observation: the input observation (one, or a batch)
+        :param state: unused (no recurrent policy)
+        :param episode_start: unused (no recurrent policy)
+        :param deterministic: whether to return the most likely action
+        :return: the actions, as the env takes them, and the unchanged state
+        """
+        actions, state = BasePolicy.predict(self, observation, state, episode_start, deterministic)  # type: ignore[arg-type]
+        offset = action_offset(self.action_space)
+        if offset is not None:
+            actions = actions + offset
+        return actions, state

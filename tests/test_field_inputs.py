@@ -1,0 +1,460 @@
+"""
+Inputs from the field that SB3 and rl-zoo3 users have reported as bugs over the years (issue 11), each with its
+neighbours: action spaces with an offset, schedules past the end of training, short runs in TensorBoard, and NaN or
+infinity from an env.
+"""
+
+import copy
+import glob
+import math
+from pathlib import Path
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from gymnasium import spaces
+from rl_zoo3.exp_manager import ExperimentManager
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.utils import FloatSchedule, LinearSchedule
+from stable_baselines3.common.vec_env import DummyVecEnv
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+from test_contract import make_model, parameters_equal
+from test_zoo import run
+
+from sb3_classic import REINFORCE, NStepSARSA
+from sb3_classic.common.buffers import all_finite
+
+MODEL_LIST = [REINFORCE, NStepSARSA]
+
+
+class ActionRecordingEnv(gym.Env[np.ndarray, Any]):
+    """
+    Episodes of 6 steps with random observations; records every action it receives and refuses one outside its
+    action space (as a real env with an offset would misbehave).
+
+    :param action_space: the action space to declare
+    """
+
+    def __init__(self, action_space: spaces.Space) -> None:
+        self.observation_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
+        self.action_space = action_space
+        self.received: list[Any] = []
+        self._steps = 0
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        self._steps = 0
+        return self.observation_space.sample(), {}
+
+    def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+        if not self.action_space.contains(np.asarray(action, dtype=self.action_space.dtype)):
+            raise ValueError(f"action {action!r} is not in {self.action_space}")
+        self.received.append(np.array(action).tolist())
+        self._steps += 1
+        return self.observation_space.sample(), float(np.sum(action)), self._steps >= 6, False, {}
+
+
+def all_values(space: spaces.Space) -> set[Any]:
+    """Every action of a Discrete or MultiDiscrete space, as the env takes them."""
+    if isinstance(space, spaces.Discrete):
+        return set(range(int(space.start), int(space.start + space.n)))
+    assert isinstance(space, spaces.MultiDiscrete)
+    grids = np.meshgrid(*[np.arange(s, s + n) for s, n in zip(space.start, space.nvec, strict=True)], indexing="ij")
+    return {tuple(int(v) for v in values) for values in np.stack([g.ravel() for g in grids], axis=1)}
+
+
+def as_set(actions: list[Any]) -> set[Any]:
+    return {tuple(a) if isinstance(a, list) else a for a in actions}
+
+
+def exploring(model_class: type[BaseAlgorithm], space: spaces.Space, **kwargs: Any) -> Any:
+    """A model that acts at random while it learns (ε = 1 for SARSA; REINFORCE's untrained policy is near-uniform)."""
+    env = ActionRecordingEnv(space)
+    extra = dict(exploration_initial_eps=1.0, exploration_final_eps=1.0) if model_class is NStepSARSA else {}
+    return make_model(model_class, DummyVecEnv([lambda: Monitor(env)]), seed=0, **extra, **kwargs), env
+
+
+class RecordLocal(BaseCallback):
+    """Keeps a variable of the rollout loop at every step (``self.locals[name]``)."""
+
+    def __init__(self, name: str) -> None:
+        super().__init__()
+        self.name = name
+        self.values: list[Any] = []
+
+    def _on_step(self) -> bool:
+        self.values.append(np.copy(self.locals[self.name]))
+        return True
+
+
+# --- 1. Action spaces with an offset --------------------------------------------------------------------------------
+
+OFFSET_SPACES = {
+    "Discrete(3,start=1)": spaces.Discrete(3, start=1),
+    "Discrete(4,start=-2)": spaces.Discrete(4, start=-2),
+}
+MULTI_OFFSET_SPACES = {
+    "MultiDiscrete([3,2],start=[1,-1])": spaces.MultiDiscrete([3, 2], start=[1, -1]),
+    "MultiDiscrete(3 dims, several starts)": spaces.MultiDiscrete([2, 3, 2], start=[5, 0, -3]),
+}
+OFFSET_CASES = [
+    pytest.param(cls, space, id=f"{cls.__name__}-{name}")
+    for cls, cases in ((REINFORCE, OFFSET_SPACES | MULTI_OFFSET_SPACES), (NStepSARSA, OFFSET_SPACES))
+    for name, space in cases.items()
+]
+
+
+@pytest.mark.parametrize(("model_class", "space"), OFFSET_CASES)
+def test_offset_action_spaces_act_in_the_envs_values(tmp_path: Path, model_class: type[BaseAlgorithm], space: Any) -> None:
+    model, env = exploring(model_class, space)
+    sampled_indices = RecordLocal("actions")
+    model.learn(400, callback=sampled_indices)
+    # Every action the env received is one of its own, and all of them were tried
+    assert as_set(env.received) == all_values(space)
+    # What the rollout loop stores in the buffer (and the networks see) are indices 0..n-1
+    indices = np.concatenate(sampled_indices.values)
+    assert indices.min() == 0
+    assert (indices < np.asarray(space.nvec if isinstance(space, spaces.MultiDiscrete) else space.n)).all()
+
+    obs = np.stack([env.observation_space.sample() for _ in range(300)])
+    for deterministic in (True, False):
+        actions, _ = model.predict(obs, deterministic=deterministic)
+        assert all(space.contains(np.asarray(a, dtype=space.dtype)) for a in actions), actions[:5]
+    # predict(deterministic=False) explores over the env's values too (SARSA's ε is 1 here)
+    sampled, _ = model.predict(obs, deterministic=False)
+    assert as_set([np.asarray(a).tolist() for a in sampled]) == all_values(space)
+    # The policy alone, as rl-zoo3 and users call it, agrees
+    np.testing.assert_array_equal(model.policy.predict(obs, deterministic=True)[0], model.predict(obs, deterministic=True)[0])
+
+    # Evaluation (EvalCallback, the zoo's evaluations) steps the env with predict's actions
+    env.received.clear()
+    evaluate_policy(model, model.get_env(), n_eval_episodes=3)
+    assert as_set(env.received) <= all_values(space)
+
+    # load(): the space, and so the offset, comes back with the model
+    model.save(tmp_path / "model")
+    loaded = model_class.load(tmp_path / "model", device="cpu")
+    assert loaded.action_space == space
+    np.testing.assert_array_equal(loaded.predict(obs, deterministic=True)[0], model.predict(obs, deterministic=True)[0])
+    loaded.set_env(DummyVecEnv([lambda: Monitor(env)]))
+    env.received.clear()
+    loaded.learn(100)
+    assert as_set(env.received) <= all_values(space)
+
+
+def test_offset_greedy_action_is_the_index_plus_start() -> None:
+    space = spaces.Discrete(3, start=-5)
+    model, env = exploring(NStepSARSA, space)
+    obs = np.stack([env.observation_space.sample() for _ in range(50)])
+    with th.no_grad():
+        indices = model.policy.q_net(th.as_tensor(obs)).argmax(dim=1).numpy()
+    np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], indices - 5)
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_zero_start_is_unchanged(model_class: type[BaseAlgorithm]) -> None:
+    """``start=0`` (the usual case) and ``Box`` actions have no offset: the loop sends what it samples."""
+    model, env = exploring(model_class, spaces.Discrete(3))
+    assert model._action_offset is None
+    model.learn(100)
+    assert as_set(env.received) == {0, 1, 2}
+
+
+def test_box_actions_are_unchanged() -> None:
+    space = spaces.Box(-0.5, 2.0, shape=(2,), dtype=np.float32)
+    model, env = exploring(REINFORCE, space)
+    assert model._action_offset is None
+    model.learn(200)
+    received = np.array(env.received)
+    # Clipped to the bounds, never shifted: both bounds are reached by the unit Gaussian's clipped samples
+    assert received.min() == pytest.approx(-0.5)
+    assert received.max() <= 2.0
+    obs = np.stack([env.observation_space.sample() for _ in range(20)])
+    np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], model.policy.predict(obs, deterministic=True)[0])
+
+
+OFFSET_ENV_MODULE = """
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+
+class OffsetActions(gym.Env):
+    \"\"\"Actions 1, 2, 3; anything else is an error. Reward 1 for action 3, episodes of 20 steps.\"\"\"
+
+    def __init__(self):
+        self.observation_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+        self.action_space = spaces.Discrete(3, start=1)
+        self._steps = 0
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self._steps = 0
+        return self.observation_space.sample(), {}
+
+    def step(self, action):
+        if not self.action_space.contains(int(action)):
+            raise ValueError(f"action {action!r} is not in {self.action_space}")
+        self._steps += 1
+        return self.observation_space.sample(), float(action == 3), self._steps >= 20, False, {}
+
+
+gym.register("OffsetActions-v0", entry_point=OffsetActions)
+"""
+
+
+@pytest.mark.parametrize("algo", ["reinforce", "nstep_sarsa"])
+def test_offset_actions_through_the_zoo(tmp_path: Path, algo: str) -> None:
+    """``python -m rl_zoo3.train`` (with evaluations) and ``enjoy`` on an env whose actions are 1, 2, 3."""
+    (tmp_path / "offset_env.py").write_text(OFFSET_ENV_MODULE)
+    common = ["--algo", algo, "--env", "OffsetActions-v0", "--gym-packages", "offset_env"]
+    env = {"PYTHONPATH": str(tmp_path)}
+    train = run(
+        tmp_path, "-m", "rl_zoo3.train", *common, "-n", "600", "--seed", "0", "--eval-freq", "200", "--eval-episodes", "2",
+        env=env,
+    )  # fmt: skip
+    assert "Using 'default' hyperparameters" in train.stdout
+    evaluations = np.load(tmp_path / "logs" / algo / "OffsetActions-v0_1" / "evaluations.npz")
+    assert len(evaluations["timesteps"]) >= 2
+    enjoy = run(tmp_path, "-m", "rl_zoo3.enjoy", *common, "-f", "logs", "--no-render", "-n", "100", env=env)
+    assert "Episode Reward" in enjoy.stdout
+    assert "not in Discrete" not in enjoy.stderr
+
+
+# --- 2. Schedules never evaluated past the end of training ----------------------------------------------------------
+
+
+def record_learning_rates(optimizer: th.optim.Optimizer) -> list[float]:
+    """:return: a list that gets the learning rate of every later ``optimizer.step()``"""
+    seen: list[float] = []
+    optimizer.register_step_pre_hook(lambda opt, args, kwargs: seen.append(opt.param_groups[0]["lr"]))
+    return seen
+
+
+def optimizers(model: Any) -> list[th.optim.Optimizer]:
+    return [model.policy.optimizer] + ([model.policy.value_optimizer] if isinstance(model, REINFORCE) else [])
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_a_callable_learning_rate_never_goes_negative(model_class: type[BaseAlgorithm]) -> None:
+    """The issue's case: the last rollout ends past ``total_timesteps``, where ``3e-3 * progress`` is negative."""
+    schedule = lambda progress: 3e-3 * progress  # noqa: E731 (the user's input, as written in the issue)
+    extra = dict(value_learning_rate=schedule) if model_class is REINFORCE else {}
+    model = make_model(model_class, seed=0, learning_rate=schedule, **extra)
+    seen = [record_learning_rates(optimizer) for optimizer in optimizers(model)]
+    model.learn(1234)
+    assert model.num_timesteps > 1234, "the overshoot this test is about did not happen"
+    for rates in seen:
+        assert rates, "no update"
+        assert min(rates) >= 0.0, f"negative learning rate {min(rates)}"
+        assert max(rates) <= 3e-3
+        # The last update is past the end: the schedule's value at progress 0, not below it
+        assert rates[-1] == pytest.approx(0.0, abs=1e-12) or rates[-1] > 0
+    assert model._current_progress_remaining == 0.0
+
+
+def test_the_packages_lin_entries_on_8_envs() -> None:
+    """``lin_2e-3`` read by the zoo, 8 envs, train_freq 16: 1,000 steps is not a multiple of 128."""
+    schedule = ExperimentManager._preprocess_schedules({"learning_rate": "lin_2e-3"})["learning_rate"]
+    env = make_vec_env("CartPole-v1", n_envs=8, seed=0)
+    model = make_model(NStepSARSA, env, seed=0, learning_rate=schedule, train_freq=16)
+    seen = record_learning_rates(model.policy.optimizer)
+    model.learn(1000)
+    assert model.num_timesteps == 1024
+    assert min(seen) == 0.0  # the last update, past the end, at the schedule's end value
+    assert max(seen) <= 2e-3
+
+
+@pytest.mark.parametrize(
+    ("schedule", "low", "high"),
+    [
+        pytest.param(LinearSchedule(1e-3, 1e-4, 1.0), 1e-4, 1e-3, id="LinearSchedule"),
+        pytest.param(FloatSchedule(5e-4), 5e-4, 5e-4, id="FloatSchedule"),
+        pytest.param(5e-4, 5e-4, 5e-4, id="float"),
+    ],
+)
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_sb3_schedules_stay_in_their_range(model_class: type[BaseAlgorithm], schedule: Any, low: float, high: float) -> None:
+    extra = dict(value_learning_rate=schedule) if model_class is REINFORCE else {}
+    model = make_model(model_class, seed=0, learning_rate=schedule, **extra)
+    seen = [record_learning_rates(optimizer) for optimizer in optimizers(model)]
+    model.learn(777)
+    for rates in seen:
+        assert low - 1e-12 <= min(rates) <= max(rates) <= high + 1e-12
+
+
+def test_linear_epsilon_stays_in_its_range() -> None:
+    class RecordEpsilon(BaseCallback):
+        def __init__(self) -> None:
+            super().__init__()
+            self.values: list[float] = []
+
+        def _on_step(self) -> bool:
+            self.values.append(self.model.exploration_rate)  # type: ignore[attr-defined]
+            return True
+
+    callback = RecordEpsilon()
+    env = make_vec_env("CartPole-v1", n_envs=8, seed=0)
+    model = make_model(NStepSARSA, env, seed=0, exploration_schedule="linear", exploration_fraction=1.0, train_freq=16)
+    # A schedule of the progress without a clamp of its own (SB3's LinearSchedule has one)
+    model.exploration_schedule_fn = lambda progress: 1.0 - 0.9 * (1.0 - progress)
+    model.learn(1000, callback=callback)
+    assert min(callback.values) >= 0.1 - 1e-12
+    assert model.exploration_rate == pytest.approx(0.1)
+
+
+# --- 3. TensorBoard after a short run --------------------------------------------------------------------------------
+
+
+def scalars(log_dir: Path) -> dict[str, int]:
+    """:return: the number of points of every scalar of the one run in ``log_dir``"""
+    (run_dir,) = glob.glob(str(log_dir / "*"))
+    accumulator = EventAccumulator(run_dir).Reload()
+    return {tag: len(accumulator.Scalars(tag)) for tag in accumulator.Tags()["scalars"]}
+
+
+@pytest.mark.parametrize(
+    ("model_class", "own"),
+    [(NStepSARSA, {"train/loss", "train/q_mean", "rollout/exploration_rate"}), (REINFORCE, {"train/policy_loss"})],
+)
+def test_a_short_run_shows_a_curve(tmp_path: Path, model_class: type[BaseAlgorithm], own: set[str]) -> None:
+    """The issue's case: ``learn(1500)`` on CartPole-v1 with one env and the defaults."""
+    model_class("MlpPolicy", "CartPole-v1", tensorboard_log=str(tmp_path), seed=0, device="cpu").learn(1500)  # type: ignore[call-arg]
+    points = scalars(tmp_path)
+    assert {"rollout/ep_rew_mean", "train/learning_rate", *own} <= points.keys(), sorted(points)
+    assert points["rollout/ep_rew_mean"] >= 5, points
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_what_was_recorded_is_dumped_when_learn_returns(tmp_path: Path, model_class: type[BaseAlgorithm]) -> None:
+    """Fewer updates than ``log_interval``: the last update's values are in the logs anyway."""
+    model = make_model(model_class, seed=0, tensorboard_log=str(tmp_path))
+    model.learn(300, log_interval=10_000)
+    points = scalars(tmp_path)
+    assert points.get("train/learning_rate") == 1, points
+    assert "rollout/ep_rew_mean" in points
+
+
+# --- 4. NaN and infinity from an env --------------------------------------------------------------------------------
+
+
+class Corrupt(gym.Wrapper[np.ndarray, Any, np.ndarray, Any]):
+    """
+    Returns NaN or infinity in one field at one step of its life (counted over episodes).
+
+    :param env: the env to wrap
+    :param field: ``"observation"``, ``"reward"``, ``"final observation"`` (the step also terminates the episode)
+        or ``"reset"`` (the first observation)
+    :param at_step: the step (1-based, over the env's life) that returns the bad value
+    :param value: NaN or ±inf
+    """
+
+    def __init__(self, env: gym.Env, field: str, at_step: int, value: float = math.nan) -> None:
+        super().__init__(env)
+        self.field, self.at_step, self.value = field, at_step, value
+        self.steps = 0
+
+    def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        if self.field == "reset":
+            obs = np.full_like(obs, self.value)
+        return obs, info
+
+    def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.steps += 1
+        if self.steps == self.at_step:
+            if self.field == "reward":
+                reward = self.value
+            elif self.field in ("observation", "final observation"):
+                obs = obs.copy()
+                obs[1] = self.value
+                terminated = terminated or self.field == "final observation"
+        return obs, reward, terminated, truncated, info
+
+
+def corrupted_env(field: str, at_step: int, value: float = math.nan, bad_env: int = 1) -> DummyVecEnv:
+    """Two CartPole-v1 envs, the second of which returns a bad value."""
+
+    def make(idx: int) -> Any:
+        return lambda: Corrupt(gym.make("CartPole-v1"), field if idx == bad_env else "", at_step, value)
+
+    env = DummyVecEnv([make(0), make(1)])
+    env.seed(0)
+    return env
+
+
+class SnapshotAfterEachUpdate(BaseCallback):
+    """Keeps the model's parameters as every rollout starts (after the previous update)."""
+
+    snapshot: dict[str, Any]
+
+    def _on_rollout_start(self) -> None:
+        self.snapshot = copy.deepcopy(self.model.get_parameters())
+
+    def _on_step(self) -> bool:
+        return True
+
+
+def cloned_parameters(model: BaseAlgorithm) -> dict[str, Any]:
+    """:return: a copy of the model's networks and optimizer states"""
+    return copy.deepcopy(model.get_parameters())
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("observation", math.nan, r"Env 1 returned a non-finite observation \(nan\) at step 5 of its episode"),
+        ("reward", math.inf, r"Env 1 returned a non-finite reward \(inf\) at step 5 of its episode"),
+        ("final observation", -math.inf, r"Env 1 returned a non-finite final observation .*\(-inf\) at step 5 of its episode"),
+    ],
+)
+def test_a_bad_value_stops_training_before_any_update(
+    tmp_path: Path, model_class: type[BaseAlgorithm], field: str, value: float, message: str
+) -> None:
+    model = make_model(model_class, corrupted_env(field, at_step=5, value=value), seed=0)
+    before = cloned_parameters(model)
+    with pytest.raises(ValueError, match=message) as error:
+        model.learn(2000)
+    assert "VecCheckNan" in str(error.value)
+    assert parameters_equal(model.get_parameters(), before)
+    # The model can be saved, and trains on once the env is fixed
+    model.save(tmp_path / "model")
+    loaded = model_class.load(tmp_path / "model", env=make_vec_env("CartPole-v1", n_envs=2, seed=0), device="cpu")
+    assert parameters_equal(loaded.get_parameters(), before)
+    loaded.learn(200)
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_a_bad_value_later_leaves_the_last_update_intact(model_class: type[BaseAlgorithm]) -> None:
+    model = make_model(model_class, corrupted_env("observation", at_step=700), seed=0)
+    callback = SnapshotAfterEachUpdate()
+    with pytest.raises(ValueError, match="Env 1 returned a non-finite observation"):
+        model.learn(5000, callback=callback)
+    assert model._n_updates > 0, "the error came before any update: this test is about a later one"
+    assert parameters_equal(model.get_parameters(), callback.snapshot)
+    for module in model.get_parameters()["policy"].values():
+        assert th.isfinite(module).all()
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_a_bad_first_observation_is_refused_at_the_start(model_class: type[BaseAlgorithm]) -> None:
+    model = make_model(model_class, corrupted_env("reset", at_step=0), seed=0)
+    before = cloned_parameters(model)
+    with pytest.raises(ValueError, match=r"Env 1 returned a non-finite observation \(nan\) at the first observation"):
+        model.learn(100)
+    assert parameters_equal(model.get_parameters(), before)
+
+
+def test_integer_observations_are_not_checked() -> None:
+    """Images (uint8) cannot hold NaN: the check skips them instead of scanning every pixel."""
+    assert all_finite(np.zeros((2, 84, 84, 1), dtype=np.uint8))
+    assert all_finite({"image": np.zeros((2, 4), dtype=np.uint8), "vector": np.zeros((2, 3), dtype=np.float32)})
+    assert not all_finite({"image": np.zeros((2, 4), dtype=np.uint8), "vector": np.array([[0.0, np.nan]])})
