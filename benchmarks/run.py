@@ -5,6 +5,7 @@ and plots of benchmarks/results/; then the throughput of learn() against A2C's.
 
     python -m benchmarks.run            # the committed results (hours on 2 cores)
     python -m benchmarks.run --quick    # a smoke test of the whole pipeline (minutes), into benchmarks/cache/
+    python -m benchmarks.run --scheduler tcp://HOST:8786   # the runs on a Dask cluster (benchmarks/README.md)
 
 Finished runs are cached in benchmarks/cache/ and never run again: an interrupted benchmark resumes where it stopped.
 """
@@ -17,13 +18,16 @@ import queue
 import shlex
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import yaml
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TaskID, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from benchmarks.common import (
@@ -39,7 +43,16 @@ from benchmarks.common import (
     hyperparams_path,
 )
 from benchmarks.report import load_results, markdown_table, summary_table, threshold_crossings, write_learning_report
-from benchmarks.runner import RUN_FILE, init_worker, run_in_worker
+from benchmarks.runner import (
+    RUN_FILE,
+    ClusterError,
+    RunError,
+    RunResult,
+    init_worker,
+    run_in_worker,
+    store_failure,
+    store_run,
+)
 from benchmarks.throughput import ThroughputSettings, run_throughput, throughput_header, write_throughput_report
 
 
@@ -110,30 +123,108 @@ def make_specs(settings: Settings, env_ids: Sequence[str], algos: Sequence[str])
     return specs
 
 
-def run_pending(specs: Sequence[RunSpec], workers: int, cache_dir: Path, console: Console) -> list[RunSpec]:
-    """
-    Run ``specs`` in a pool of ``workers`` processes, showing the progress of each and of all.
+class ProgressSource(Protocol):
+    """A ``multiprocessing.Queue`` or a ``queue.Queue``."""
 
+    def get_nowait(self) -> tuple[str, int]:
+        """:return: the next report; :raise queue.Empty: if there is none"""
+
+
+class Runs(Protocol):
+    """Where the runs train: the local process pool (``PoolRuns``) or a Dask cluster (``benchmarks.cluster.DaskRuns``)."""
+
+    @property
+    def progress(self) -> ProgressSource:
+        """The runs' progress reports, ``(run name, env steps)``."""
+
+    def submit(self, spec: RunSpec) -> "Future[RunResult]":
+        """:return: the future of ``spec``'s ``RunResult``"""
+
+    def cancel(self) -> None:
+        """Cancel the runs not started."""
+
+
+class PoolRuns:
+    """
+    Runs in a local pool of processes (spawned: each run gets a fresh interpreter).
+
+    :param pool: the pool, whose processes report progress to ``progress`` (``init_worker``)
+    :param progress: their queue
+    """
+
+    def __init__(self, pool: ProcessPoolExecutor, progress: ProgressSource):
+        self.pool = pool
+        self.progress = progress
+
+    def submit(self, spec: RunSpec) -> "Future[RunResult]":
+        """:return: the future of ``spec``'s ``RunResult``"""
+        return self.pool.submit(run_in_worker, spec)
+
+    def cancel(self) -> None:
+        """Cancel the runs not started."""
+        self.pool.shutdown(wait=False, cancel_futures=True)
+
+
+@contextmanager
+def local_runs(workers: int) -> Iterator[PoolRuns]:
+    """:param workers: the number of processes"""
+    context = multiprocessing.get_context("spawn")
+    progress_queue = context.Queue()
+    with ProcessPoolExecutor(workers, mp_context=context, initializer=init_worker, initargs=(progress_queue,)) as pool:
+        yield PoolRuns(pool, progress_queue)
+
+
+def open_runs(workers: int, scheduler: str | None, console: Console) -> AbstractContextManager[Runs]:
+    """
+    :param workers: the processes of the local pool
+    :param scheduler: a Dask scheduler's address (``tcp://HOST:PORT``), or None for the local pool
+    :param console: where to say what the cluster is
+    :return: where the runs train, as a context
+    :raise ClusterError: if Dask is not installed, or the cluster cannot run the benchmark
+    """
+    if scheduler is None:
+        return local_runs(workers)
+    try:
+        # Dask is optional, and imported only here
+        from benchmarks import cluster
+    except ModuleNotFoundError as error:
+        if error.name not in ("dask", "distributed"):
+            raise
+        raise ClusterError(
+            f"--scheduler {scheduler}: Dask is not installed ({error}): pip install -e '.[benchmarks,dask]'"
+        ) from error
+    return cluster.connect(scheduler, console)
+
+
+def run_pending(
+    specs: Sequence[RunSpec], workers: int, cache_dir: Path, console: Console, scheduler: str | None = None
+) -> list[RunSpec]:
+    """
+    Run ``specs`` in a pool of ``workers`` processes, or on the Dask cluster of ``scheduler``, showing the progress of
+    each and of all. Every run comes back as a ``RunResult``, which this process writes into the cache.
+
+    :param specs: the runs
+    :param workers: the processes of the local pool (without ``scheduler``)
+    :param cache_dir: the cache root
+    :param console: where to show the progress
+    :param scheduler: a Dask scheduler's address (``tcp://HOST:PORT``), or None for the local pool
     :return: the runs that failed (their errors are printed, and they are not cached)
+    :raise ClusterError: if the cluster of ``scheduler`` cannot run the benchmark (nothing was run)
     """
     if not specs:
         return []
     failed = []
-    context = multiprocessing.get_context("spawn")
     columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
-    progress_queue = context.Queue()
-    with (
-        ProcessPoolExecutor(workers, mp_context=context, initializer=init_worker, initargs=(progress_queue,)) as pool,
-        Progress(*columns, console=console) as progress,
-    ):
+    with open_runs(workers, scheduler, console) as runs, Progress(*columns, console=console) as progress:
         overall = progress.add_task(f"{len(specs)} runs (env steps)", total=sum(spec.n_timesteps for spec in specs))
-        futures: dict[Future, RunSpec] = {pool.submit(run_in_worker, spec, cache_dir): spec for spec in specs}
+        futures: dict[Future[RunResult], RunSpec] = {runs.submit(spec): spec for spec in specs}
         by_name = {spec.name: spec for spec in specs}
         tasks: dict[str, TaskID] = {}
         steps = dict.fromkeys(by_name, 0)
         finished: set[str] = set()
 
         def show(name: str, num_timesteps: int) -> None:
+            # A run started again (its Dask worker died) goes back: the overall bar with it
             completed = min(num_timesteps, by_name[name].n_timesteps)
             progress.advance(overall, completed - steps[name])
             steps[name] = completed
@@ -150,10 +241,10 @@ def run_pending(specs: Sequence[RunSpec], workers: int, cache_dir: Path, console
                 done, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
                 while True:
                     try:
-                        name, num_timesteps = progress_queue.get_nowait()
+                        name, num_timesteps = runs.progress.get_nowait()
                     except queue.Empty:
                         break
-                    if name not in finished:
+                    if name in by_name and name not in finished:
                         show(name, num_timesteps)
                 for future in done:
                     spec = futures[future]
@@ -162,26 +253,55 @@ def run_pending(specs: Sequence[RunSpec], workers: int, cache_dir: Path, console
                         show(spec.name, spec.n_timesteps)
                     else:
                         progress.advance(overall, spec.n_timesteps - steps[spec.name])
-                    error = future.exception()
-                    if error is None:
+                    message = _store(spec, future, cache_dir)
+                    if message is None:
                         progress.console.print(f"done: {spec.name}")
                     else:
                         failed.append(spec)
-                        progress.console.print(
-                            f"[red]failed: {spec.name}: {error!r}[/red] (see {spec.run_dir(cache_dir)}.partial)"
-                        )
+                        progress.console.print(f"[red]failed: {spec.name}: {message}[/red]", markup=True, highlight=False)
         except KeyboardInterrupt:
-            pool.shutdown(wait=False, cancel_futures=True)
+            runs.cancel()
             raise
     return failed
 
 
-def learning_header(command: str, settings: Settings, env_ids: Sequence[str], algos: Sequence[str], workers: int) -> str:
-    """:return: the markdown above the learning tables: the command, the settings and how to read the columns"""
+def _store(spec: RunSpec, future: "Future[RunResult]", cache_dir: Path) -> str | None:
+    """
+    Write the finished run of ``future`` into the cache.
+
+    :return: None, or why the run failed (its error; where its log was kept)
+    """
+    try:
+        store_run(spec, cache_dir, future.result())
+    except RunError as error:
+        return f"{escape(str(error))} (its log: {escape(str(store_failure(spec, cache_dir, error.log)))})"
+    except Exception as error:
+        # Raised in the worker, or by Dask (KilledWorker: its workers died; CancelledError: the cluster went away),
+        # or by store_run (other versions)
+        return escape(f"{type(error).__name__}: {error}")
+    return None
+
+
+def learning_header(
+    command: str, settings: Settings, env_ids: Sequence[str], algos: Sequence[str], workers: int, scheduler: str | None = None
+) -> str:
+    """
+    :param command: the command line
+    :param settings: what the benchmark ran
+    :param env_ids: its envs
+    :param algos: its algorithms
+    :param workers: the runs in parallel on this machine (without ``scheduler``)
+    :param scheduler: the Dask scheduler the runs were sent to, if any
+    :return: the markdown above the learning tables: the command, the settings and how to read the columns
+    """
     budgets = ", ".join(f"{env_id} {settings.budgets[env_id]:,}" for env_id in env_ids)
     ours = [LABELS[algo] for algo in algos if algo in OUR_ALGOS]
     peers = [LABELS[algo] for algo in algos if algo not in OUR_ALGOS]
     versions = ", ".join(f"{name} {version}" for name, version in code_versions("reinforce").items())
+    if scheduler is None:
+        where = f"{workers} runs in parallel, torch 1 thread each, CPU ({platform.machine()}, {os.cpu_count()} cores)."
+    else:
+        where = "Runs on a Dask cluster (`--scheduler`), torch 1 thread each."
     return f"""# Learning benchmarks
 
 Produced by:
@@ -197,7 +317,7 @@ Produced by:
   settings (`lin_` schedules, DQN's `exploration_fraction`) span the budget above, as with `python -m rl_zoo3.train -n`.
 - Evaluation: {settings.eval_episodes} episodes, deterministic, on a separate env, every {settings.eval_freq:,} env steps
   and at the end of training.
-- {workers} runs in parallel, torch 1 thread each, CPU ({platform.machine()}, {os.cpu_count()} cores).
+- {where}
 - Versions: {versions}.
 
 Columns: *Final eval return*: the mean return of the evaluation at the end of training, mean ± std over seeds.
@@ -242,6 +362,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--eval-freq", type=int, help=f"env steps between two evaluations (default {FULL.eval_freq})")
     parser.add_argument("--eval-episodes", type=int, help=f"episodes per evaluation (default {FULL.eval_episodes})")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="runs in parallel (default: the cores)")
+    parser.add_argument(
+        "--scheduler",
+        metavar="tcp://HOST:PORT",
+        help="run on the Dask cluster of this scheduler instead of local processes (needs the dask extra)",
+    )
     parser.add_argument("--cache-dir", type=Path, default=DEFAULT_CACHE_DIR, help="where finished runs are kept")
     parser.add_argument("--results-dir", type=Path, help=f"tables and plots (default {DEFAULT_RESULTS_DIR}; --quick: scratch)")
     parser.add_argument("--skip-throughput", action="store_true", help="only the learning runs and their report")
@@ -268,17 +393,23 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     specs = make_specs(settings, args.envs, args.algos)
     pending = [spec for spec in specs if not (spec.run_dir(args.cache_dir) / RUN_FILE).exists()]
-    console.print(f"{len(specs)} runs: {len(specs) - len(pending)} cached, {len(pending)} to run on {args.workers} workers")
+    where = f"the Dask cluster at {args.scheduler}" if args.scheduler else f"{args.workers} workers"
+    console.print(f"{len(specs)} runs: {len(specs) - len(pending)} cached, {len(pending)} to run on {where}")
     start = time.perf_counter()
     try:
-        failed = run_pending(pending, args.workers, args.cache_dir, console)
+        run_pending(pending, args.workers, args.cache_dir, console, args.scheduler)
     except KeyboardInterrupt:
         console.print("Interrupted: the finished runs are cached; run the same command again to resume.")
         return 130
+    except ClusterError as error:
+        console.print(f"[red]{escape(str(error))}[/red]", highlight=False)
+        return 2
     learning_time = time.perf_counter() - start
 
     results = load_results(specs, args.cache_dir)
-    header = learning_header(command, settings, args.envs, args.algos, args.workers)
+    if results.runs.empty:
+        return report_missing(results.missing, console)
+    header = learning_header(command, settings, args.envs, args.algos, args.workers, args.scheduler)
     path = write_learning_report(results, args.envs, args.algos, header, results_dir, footer=hyperparams_section(specs))
     crossings = threshold_crossings(results)
     for env_id in args.envs:
@@ -298,10 +429,22 @@ def main(argv: Sequence[str] | None = None) -> int:
             soft_wrap=True,
             markup=False,
         )
-    if failed:
-        console.print(f"[red]{len(failed)} runs failed: {', '.join(spec.name for spec in failed)}[/red]")
-        return 1
-    return 0
+    return report_missing(results.missing, console)
+
+
+def report_missing(missing: Sequence[RunSpec], console: Console) -> int:
+    """
+    Whatever happened to them (errors, dead workers), the runs not in the cache are named, never left out quietly.
+
+    :param missing: the runs of the benchmark not in the cache
+    :param console: where to name them
+    :return: the command's exit status: 1 if any is missing
+    """
+    if not missing:
+        return 0
+    names = ", ".join(spec.name for spec in missing)
+    console.print(f"[red]{len(missing)} runs failed, not in the cache: {escape(names)}[/red]", highlight=False, soft_wrap=True)
+    return 1
 
 
 if __name__ == "__main__":

@@ -4,8 +4,11 @@ import argparse
 import json
 import platform
 import shutil
+import tempfile
 import time
+import traceback
 from contextlib import redirect_stderr, redirect_stdout
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Protocol
@@ -123,6 +126,43 @@ def load_run(run_dir: Path) -> dict[str, Any]:
     return json.loads((run_dir / RUN_FILE).read_text())
 
 
+@dataclass
+class RunResult:
+    """
+    A finished run, as it travels from where it trained (a pool process, a Dask worker) to the process that caches it.
+
+    :param summary: the run's summary (``run.json``)
+    :param files: every file of the run's folder, by path relative to it (``run.json``, ``episodes.csv``,
+        ``evaluations.csv``, ``hyperparams.yml``, ``train.log``, the zoo's folder)
+    :param host: the machine it trained on (and the Dask worker, if any)
+    """
+
+    summary: dict[str, Any]
+    files: dict[str, bytes]
+    host: str
+
+
+class RunError(RuntimeError):
+    """
+    A run that raised: its message names the error and the machine, and it carries the run's ``train.log``.
+
+    :param message: what failed
+    :param log: the run's log (the zoo's output and the traceback)
+    """
+
+    def __init__(self, message: str, log: str):
+        super().__init__(message)
+        self.log = log
+
+    def __reduce__(self) -> tuple[type["RunError"], tuple[str, str]]:
+        # Pickled back to the parent process or the Dask client with its log
+        return type(self), (str(self), self.log)
+
+
+class ClusterError(RuntimeError):
+    """The Dask cluster of ``--scheduler`` cannot run the benchmark: unreachable, or workers with other versions."""
+
+
 def run_one(spec: RunSpec, cache_dir: Path, queue: ProgressQueue | None = None) -> dict[str, Any]:
     """
     Train ``spec`` unless it is cached, and cache it: ``run.json`` (settings, versions, timings),
@@ -137,22 +177,94 @@ def run_one(spec: RunSpec, cache_dir: Path, queue: ProgressQueue | None = None) 
     run_dir = spec.run_dir(cache_dir)
     if (run_dir / RUN_FILE).exists():
         return load_run(run_dir)
-    # Built in a scratch folder, moved into place when complete: an interrupted run leaves no partial cache entry
+    return store_run(spec, cache_dir, execute_run(spec, queue))
+
+
+def execute_run(spec: RunSpec, queue: ProgressQueue | None = None, host: str | None = None) -> RunResult:
+    """
+    Train ``spec`` in a temporary folder and return the contents of its files: wherever it runs, the process that
+    called ``store_run`` writes the cache (Dask workers need no filesystem shared with it).
+
+    :param spec: the run
+    :param queue: where to report progress (the run's name and its env steps), if anywhere
+    :param host: the machine it runs on, for messages (default: its hostname)
+    :return: the run's summary and files
+    :raise RunError: if training failed (with the run's log)
+    """
+    host = host or platform.node()
+    with tempfile.TemporaryDirectory(prefix="sb3-classic-run-") as scratch:
+        folder = Path(scratch)
+        # The exact YAML entry of the key, for the zoo to read (the source YAML may be edited meanwhile)
+        config = folder / "hyperparams.yml"
+        config.write_text(yaml.safe_dump({spec.env_id: spec.hyperparams}, sort_keys=True))
+
+        th.set_num_threads(1)
+        register_algorithms()
+        with open(folder / "train.log", "w") as log:
+            try:
+                with redirect_stdout(log), redirect_stderr(log):
+                    summary = _train(spec, folder, config, queue)
+            except Exception as error:
+                log.write(traceback.format_exc())
+                log.close()
+                message = f"{error!r} on {host}"
+                raise RunError(message, (folder / "train.log").read_text(errors="replace")) from error
+        (folder / RUN_FILE).write_text(json.dumps(summary, indent=2, sort_keys=True))
+        files = {path.relative_to(folder).as_posix(): path.read_bytes() for path in folder.rglob("*") if path.is_file()}
+    return RunResult(summary=summary, files=files, host=host)
+
+
+def store_run(spec: RunSpec, cache_dir: Path, result: RunResult) -> dict[str, Any]:
+    """
+    Write a finished run into the cache. The folder is built in ``<run dir>.partial`` and renamed when complete:
+    an interrupted benchmark leaves no partial cache entry.
+
+    :param spec: the run
+    :param cache_dir: the cache root
+    :param result: what ``execute_run`` returned for ``spec``
+    :return: the run's summary (``run.json``)
+    :raise ValueError: if the run was trained with other code versions than this process's (its cache key differs)
+    """
+    if result.summary["key"] != spec.key():
+        ours = code_versions(spec.algo)
+        theirs = result.summary["versions"]
+        differences = ", ".join(
+            f"{name} {theirs.get(name, 'missing')} there, {version} here"
+            for name, version in ours.items()
+            if theirs.get(name) != version
+        )
+        raise ValueError(
+            f"{spec.name} was trained on {result.host} with other versions than this process's "
+            f"({differences or 'its cache key differs'}): install the same versions there, or run it here"
+        )
+    run_dir = spec.run_dir(cache_dir)
+    partial = run_dir.with_name(run_dir.name + ".partial")
+    shutil.rmtree(partial, ignore_errors=True)
+    for name, content in result.files.items():
+        path = partial / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(content)
+    shutil.rmtree(run_dir, ignore_errors=True)
+    partial.rename(run_dir)
+    return result.summary
+
+
+def store_failure(spec: RunSpec, cache_dir: Path, log: str) -> Path:
+    """
+    Keep the log of a failed run where the cache has its partial folder, for the user to read.
+
+    :param spec: the run
+    :param cache_dir: the cache root
+    :param log: its ``train.log``
+    :return: the log's path
+    """
+    run_dir = spec.run_dir(cache_dir)
     partial = run_dir.with_name(run_dir.name + ".partial")
     shutil.rmtree(partial, ignore_errors=True)
     partial.mkdir(parents=True)
-    # The exact YAML entry of the key, for the zoo to read (the source YAML may be edited meanwhile)
-    config = partial / "hyperparams.yml"
-    config.write_text(yaml.safe_dump({spec.env_id: spec.hyperparams}, sort_keys=True))
-
-    th.set_num_threads(1)
-    register_algorithms()
-    with open(partial / "train.log", "w") as log, redirect_stdout(log), redirect_stderr(log):
-        summary = _train(spec, partial, config, queue)
-    (partial / RUN_FILE).write_text(json.dumps(summary, indent=2, sort_keys=True))
-    shutil.rmtree(run_dir, ignore_errors=True)
-    partial.rename(run_dir)
-    return summary
+    path = partial / "train.log"
+    path.write_text(log)
+    return path
 
 
 def init_worker(queue: ProgressQueue) -> None:
@@ -165,9 +277,9 @@ def init_worker(queue: ProgressQueue) -> None:
     _worker_queue = queue
 
 
-def run_in_worker(spec: RunSpec, cache_dir: Path) -> dict[str, Any]:
-    """``run_one`` in a pool process, reporting progress to the queue of ``init_worker``."""
-    return run_one(spec, cache_dir, _worker_queue)
+def run_in_worker(spec: RunSpec) -> RunResult:
+    """``execute_run`` in a pool process, reporting progress to the queue of ``init_worker``."""
+    return execute_run(spec, _worker_queue)
 
 
 def _train(spec: RunSpec, folder: Path, config: Path, queue: ProgressQueue | None) -> dict[str, Any]:
