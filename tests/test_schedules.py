@@ -25,8 +25,8 @@ def test_exponential_decay() -> None:
 
 
 def optimizer_lrs(model: REINFORCE | NStepSARSA) -> list[float]:
-    optimizers = [model.policy.optimizer] + ([model.policy.value_optimizer] if isinstance(model, REINFORCE) else [])
-    return [optimizer.param_groups[0]["lr"] for optimizer in optimizers]
+    optimizers = [model.policy.optimizer, getattr(model.policy, "value_optimizer", None)]
+    return [optimizer.param_groups[0]["lr"] for optimizer in optimizers if optimizer is not None]
 
 
 def test_reinforce_learning_rates_are_separate_and_decay_per_episode() -> None:

@@ -3,6 +3,7 @@ Network options shared by the policies: activations with arguments, He (Kaiming)
 optimizer's implementation.
 """
 
+import math
 from collections.abc import Iterable
 from functools import partial
 from typing import Any, Literal
@@ -62,9 +63,47 @@ def kaiming_init(
                     nn.init.zeros_(layer.bias)
 
 
-def check_weight_init(weight_init: str) -> None:
-    """:param weight_init: one of ``WEIGHT_INITS``"""
+def check_weight_init(weight_init: str | float) -> None:
+    """:param weight_init: one of ``WEIGHT_INITS``, or a finite number (every weight starts at that constant)"""
+    if isinstance(weight_init, (int, float)) and not isinstance(weight_init, bool):
+        if not math.isfinite(weight_init):
+            raise ValueError(f"weight_init={weight_init!r} must be finite (0.0 is the book's start for linear methods)")
+        return
     check_choice("weight_init", weight_init, WEIGHT_INITS)
+
+
+def constant_init(modules: Iterable[nn.Module], value: float) -> None:
+    """
+    Every weight of the linear and convolutional layers in ``modules`` set to ``value``, biases to 0: the book's
+    linear methods start from w = 0 (S&B §9.4, §10.1), or from an optimistic constant (§2.6).
+
+    :param modules: the layers to initialise
+    :param value: the constant
+    """
+    for module in modules:
+        for layer in module.modules():
+            if isinstance(layer, (nn.Linear, nn.Conv2d)):
+                nn.init.constant_(layer.weight, value)
+                if layer.bias is not None:
+                    nn.init.zeros_(layer.bias)
+
+
+def remove_biases(module: nn.Module) -> None:
+    """
+    Replace every ``nn.Linear`` inside ``module`` by one without bias, in place (same weights). A linear q̂(s, a, w) =
+    wᵀx(s, a) of the book has no bias term (S&B eq. 9.8): with one-hot or tile features a bias would be one more
+    feature active in every state, coupling all states' values.
+
+    :param module: the network (SB3's ``QNetwork.q_net``, ``MlpExtractor``, ``action_net``, ...)
+    """
+    for name, child in module.named_children():
+        if isinstance(child, nn.Linear) and child.bias is not None:
+            linear = nn.Linear(child.in_features, child.out_features, bias=False, device=child.weight.device)
+            with th.no_grad():
+                linear.weight.copy_(child.weight)
+            setattr(module, name, linear)
+        else:
+            remove_biases(child)
 
 
 def optimizer_kwargs_with_defaults(

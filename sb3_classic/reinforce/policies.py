@@ -13,9 +13,11 @@ from torch import nn
 from sb3_classic.common.policies import EnvActionsMixin
 from sb3_classic.common.torch_layers import (
     check_weight_init,
+    constant_init,
     kaiming_init,
     make_activation,
     optimizer_kwargs_with_defaults,
+    remove_biases,
 )
 
 
@@ -35,7 +37,12 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
     :param activation_fn: activation class of the hidden layers
     :param activation_kwargs: arguments of ``activation_fn``, e.g. ``dict(negative_slope=0.1)`` for ``nn.LeakyReLU``
     :param weight_init: ``"orthogonal"`` (SB3's A2C/PPO scheme), ``"kaiming"`` (He initialisation of the hidden
-        layers; output layers keep PyTorch's default) or ``"default"`` (PyTorch's default everywhere)
+        layers; output layers keep PyTorch's default), ``"default"`` (PyTorch's default everywhere), or a number:
+        every weight starts at that constant and every bias at 0 (the book's linear methods start at 0)
+    :param with_bias: whether the linear layers have a bias (SB3's ``create_mlp`` name). The book's linear policy
+        h(s, a, θ) = θᵀx(s, a) (S&B eq. 13.3) and baseline v̂(s, w) = wᵀx(s) are ``net_arch=[], with_bias=False``
+    :param use_baseline: build the value network v̂(s, w) and its optimizer (REINFORCE with baseline, §13.4); False
+        builds none (plain REINFORCE, §13.3)
     :param log_std_init: initial log standard deviation of Gaussian actions (Box action spaces)
     :param features_extractor_class: features extractor to use
     :param features_extractor_kwargs: keyword arguments to pass to the features extractor
@@ -57,7 +64,9 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         net_arch: list[int] | dict[str, list[int]] | None = None,
         activation_fn: type[nn.Module] = nn.Tanh,
         activation_kwargs: dict[str, Any] | None = None,
-        weight_init: str = "orthogonal",
+        weight_init: str | float = "orthogonal",
+        with_bias: bool = True,
+        use_baseline: bool = True,
         log_std_init: float = 0.0,
         features_extractor_class: type[BaseFeaturesExtractor] = FlattenExtractor,
         features_extractor_kwargs: dict[str, Any] | None = None,
@@ -85,13 +94,25 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         self.activation_fn = activation_fn
         self.activation_kwargs = activation_kwargs
         self.weight_init = weight_init
-        if weight_init == "kaiming":
+        self.with_bias = with_bias
+        self.use_baseline = use_baseline
+        if not use_baseline:
+            # Plain REINFORCE: no v̂ (ActorCriticPolicy always builds one; nothing of it is kept)
+            self.mlp_extractor.value_net = nn.Sequential()
+            self.value_net = nn.Sequential()  # type: ignore[assignment]
+            if not share_features_extractor:
+                self.vf_features_extractor = self.pi_features_extractor
+        if not with_bias:
+            remove_biases(self)
+        if not isinstance(weight_init, str):
+            constant_init([self], weight_init)
+        elif weight_init == "kaiming":
             hidden = {self.pi_features_extractor, self.vf_features_extractor, self.mlp_extractor}
             kaiming_init(hidden, activation_fn, activation_kwargs)
 
         # Two optimizers instead of ActorCriticPolicy's one: α^θ for the policy network, α^w for the value network
         value_modules = [self.mlp_extractor.value_net, self.value_net]
-        if not share_features_extractor:
+        if not share_features_extractor and use_baseline:
             value_modules.append(self.vf_features_extractor)
         value_parameters = [param for module in value_modules for param in module.parameters()]
         value_ids = {id(param) for param in value_parameters}
@@ -99,7 +120,19 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         value_lr_schedule = value_lr_schedule or lr_schedule
         optimizer_kwargs = optimizer_kwargs_with_defaults(self.optimizer_class, self.optimizer_kwargs)
         self.optimizer = self.optimizer_class(policy_parameters, lr=lr_schedule(1), **optimizer_kwargs)  # type: ignore[call-arg]
-        self.value_optimizer = self.optimizer_class(value_parameters, lr=value_lr_schedule(1), **optimizer_kwargs)  # type: ignore[call-arg]
+        self.value_optimizer: th.optim.Optimizer | None = None
+        if use_baseline:
+            self.value_optimizer = self.optimizer_class(value_parameters, lr=value_lr_schedule(1), **optimizer_kwargs)  # type: ignore[call-arg]
+
+    def predict_values(self, obs: PyTorchObs) -> th.Tensor:
+        """
+        :param obs: observations
+        :return: v̂(obs, w), shape (batch, 1)
+        :raises ValueError: for plain REINFORCE (``use_baseline=False``), which has no value network
+        """
+        if not self.use_baseline:
+            raise ValueError("This policy has no value network (use_baseline=False): v̂ is not defined")
+        return super().predict_values(obs)
 
     def sample_actions(self, obs: PyTorchObs) -> th.Tensor:
         """
@@ -120,7 +153,9 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
 
     @property
     def value_parameters(self) -> list[nn.Parameter]:
-        """The parameters ``value_optimizer`` trains (w)."""
+        """The parameters ``value_optimizer`` trains (w; none without a baseline)."""
+        if self.value_optimizer is None:
+            return []
         return [param for group in self.value_optimizer.param_groups for param in group["params"]]
 
     @property
@@ -136,6 +171,8 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
             activation_fn=self.activation_fn,
             activation_kwargs=self.activation_kwargs,
             weight_init=self.weight_init,
+            with_bias=self.with_bias,
+            use_baseline=self.use_baseline,
             share_features_extractor=self.share_features_extractor,
         )
         return data

@@ -11,7 +11,7 @@ from stable_baselines3.common.utils import FloatSchedule, explained_variance, ob
 from sb3_classic.common.buffers import TrainingBatch, select
 from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
 from sb3_classic.common.returns import discounted_returns
-from sb3_classic.common.utils import check_learning_rate, check_positive_int, check_range
+from sb3_classic.common.utils import check_choice, check_learning_rate, check_positive_int, check_range
 from sb3_classic.reinforce.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, REINFORCEPolicy
 
 SelfREINFORCE = TypeVar("SelfREINFORCE", bound="REINFORCE")
@@ -28,11 +28,28 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
     - the value network follows w ← w + α^w δ_t ∇v̂(S_t, w);
     - the policy network follows θ ← θ + α^θ δ_t ∇ln π(A_t|S_t, θ),
 
-    as one gradient step of each on the mean over the batch. The book's update also has a factor γ^t
-    (``gamma_t_factor=True``). It is off by default, as in most implementations and in the seed report's
-    results: it makes the gradient the exact gradient of the discounted return from the start state, but it
-    scales the updates of late steps down to nothing (γ^500 ≈ 0.007 for γ = 0.99), which slows learning on long
-    episodes.
+    ``update_mode`` says how an update applies them:
+
+    - ``"batch"`` (the default): one gradient step of each network on the *mean* over the batch's steps, as A2C and
+      most implementations do. Each step t then moves the weights by α/T of its own update for an episode of T
+      steps, and T changes during training;
+    - ``"per_step"``: the book's loop over the episode, t = 0, …, T − 1 (§13.4's box): δ_t from the current w, the
+      value update with α^w, then the policy update with α^θ, each with the full step size. With plain SGD
+      (``policy_kwargs=dict(optimizer_class=th.optim.SGD)``), one env and ``n_episodes=1`` it is the book's algorithm
+      to the last bit.
+
+    Why batch by default: the settings of ``hyperparams/reinforce.yml`` (Adam, the seed report's learning rates)
+    were found and benchmarked with it; the per-step mode makes T optimizer steps per episode instead of one
+    (hundreds on Acrobot-v1), so the same learning rates are not comparable between the modes.
+
+    The book's update also has a factor γ^t (``gamma_t_factor=True``). It is off by default, as in most
+    implementations and in the seed report's results: it makes the gradient the exact gradient of the discounted
+    return from the start state, but it scales the updates of late steps down to nothing (γ^500 ≈ 0.007 for
+    γ = 0.99), which slows learning on long episodes.
+
+    ``use_baseline=False`` is plain REINFORCE (§13.3, eq. 13.8): no value network is built, δ_t is G_t, and
+    ``value_learning_rate`` is unused. Without v̂ there is nothing to bootstrap a time-limit truncation from: the
+    return ends there, as with ``handle_timeout_termination=False``.
 
     With several envs, an update takes every episode that has ended, and an env whose episode is still running
     keeps it for a later update: nothing is thrown away, and long episodes are not dropped in favour of short
@@ -47,6 +64,9 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         best: 0.01 on CartPole-v1, 0.1 on Acrobot-v1
     :param n_episodes: complete episodes per update (all envs together; an update takes every episode that has
         ended, so it may use more)
+    :param update_mode: ``"batch"`` (one gradient step of each network on the batch mean) or ``"per_step"`` (the
+        book's T updates per episode with the full step sizes), see above
+    :param use_baseline: learn v̂(s, w) and use δ_t = G_t − v̂(S_t, w) (§13.4); False: plain REINFORCE (§13.3)
     :param gamma: discount factor γ
     :param gamma_t_factor: multiply the policy gradient of step t by γ^t as in the book (see above)
     :param normalize_advantage: standardise δ over the batch before the policy gradient (the value network still
@@ -87,6 +107,8 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         learning_rate: float | Schedule = 3e-3,
         value_learning_rate: float | Schedule = 1e-2,
         n_episodes: int = 1,
+        update_mode: str = "batch",
+        use_baseline: bool = True,
         gamma: float = 0.99,
         gamma_t_factor: bool = False,
         normalize_advantage: bool = False,
@@ -131,6 +153,8 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         )
         self.value_learning_rate = value_learning_rate
         self.n_episodes = n_episodes
+        self.update_mode = update_mode
+        self.use_baseline = use_baseline
         self.gamma_t_factor = gamma_t_factor
         self.normalize_advantage = normalize_advantage
         self.ent_coef = ent_coef
@@ -142,6 +166,12 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         super()._check_arguments()
         check_learning_rate("value_learning_rate", self.value_learning_rate)
         check_positive_int("n_episodes", self.n_episodes, hint="1 is the book's algorithm")
+        check_choice("update_mode", self.update_mode, ("batch", "per_step"))
+        if self.normalize_advantage and self.update_mode == "per_step":
+            raise ValueError(
+                "normalize_advantage=True standardises δ over a batch, but update_mode='per_step' updates one step at a "
+                "time: pass update_mode='batch', or normalize_advantage=False"
+            )
         check_range("ent_coef", self.ent_coef, 0.0, float("inf"), hint="0.0 disables the entropy bonus")
 
     def _make_policy(self) -> BasePolicy:
@@ -151,6 +181,7 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             self.action_space,
             self.lr_schedule,
             value_lr_schedule=self.value_lr_schedule,
+            use_baseline=self.use_baseline,
             **self.policy_kwargs,
         )
 
@@ -175,7 +206,7 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             return None
         # v̂(S_T, w) of the final states of time-limit truncations, to bootstrap their returns from
         next_values = np.zeros_like(data.rewards)
-        if data.truncated.any():
+        if data.truncated.any() and self.use_baseline:
             with th.no_grad():
                 final_obs = obs_as_tensor(select(data.final_observations, data.truncated), self.device)
                 next_values[data.truncated] = self.policy.predict_values(final_obs).flatten().cpu().numpy()
@@ -188,56 +219,93 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             trained=trained,
         )
 
-    def train(self) -> None:
-        """Update both networks on every complete episode in the buffer (one gradient step each)."""
-        self.policy.set_training_mode(True)
-        self._update_learning_rates(
-            [
-                (self.policy.optimizer, self.lr_schedule, "train/learning_rate"),
-                (self.policy.value_optimizer, self.value_lr_schedule, "train/value_learning_rate"),
-            ]
-        )
-        batch = self._training_batch()
-        if batch is None:
-            return
-        returns = batch.targets
-        values, log_prob, entropy = self.policy.evaluate_actions(batch.observations, batch.actions)
-        values = values.flatten()
+    def _gradient_step(
+        self, observations: th.Tensor | dict[str, th.Tensor], actions: th.Tensor, returns: th.Tensor, episode_steps: th.Tensor
+    ) -> dict[str, th.Tensor]:
+        """
+        One gradient step of each network on the mean over the given steps (one step: the book's per-step update).
+
+        :param observations: S_t, a batch of B
+        :param actions: A_t, as the buffer stores them
+        :param returns: G_t, shape (B,)
+        :param episode_steps: t, the step of each within its episode, shape (B,)
+        :return: the losses, and v̂(S_t) before the step (detached; zeros without a baseline)
+        """
+        if self.use_baseline:
+            values, log_prob, entropy = self.policy.evaluate_actions(observations, actions)
+            values = values.flatten()
+        else:
+            distribution = self.policy.get_distribution(observations)
+            log_prob, entropy = distribution.log_prob(actions), distribution.entropy()
+            values = th.zeros_like(returns)
         assert entropy is not None, "the action distributions REINFORCE supports have an entropy"
 
-        # δ_t = G_t − v̂(S_t, w) (S&B §13.4); the baseline is a constant for the policy gradient
+        # δ_t = G_t − v̂(S_t, w) (S&B §13.4), from w before this step's update; the baseline is a constant for the
+        # policy gradient. Plain REINFORCE: δ_t = G_t (§13.3)
         advantages = returns - values.detach()
         policy_weights = advantages
         if self.normalize_advantage and len(advantages) > 1:
             policy_weights = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
         if self.gamma_t_factor:
-            policy_weights = policy_weights * self.gamma**batch.episode_steps
-        # θ ← θ + α^θ γ^t δ_t ∇ln π(A_t|S_t, θ) (S&B §13.4, eq. 13.11 with b(S_t) = v̂(S_t, w))
+            policy_weights = policy_weights * self.gamma**episode_steps
+        # θ ← θ + α^θ γ^t δ_t ∇ln π(A_t|S_t, θ) (S&B §13.4, eq. 13.11 with b(S_t) = v̂(S_t, w); eq. 13.8 with b = 0)
         policy_loss = -(policy_weights * log_prob).mean()
         # w ← w + α^w δ_t ∇v̂(S_t, w) (S&B §13.4): the gradient of ½ δ_t²
         value_loss = 0.5 * ((returns - values) ** 2).mean()
         entropy_loss = -entropy.mean()
-        loss = policy_loss + self.ent_coef * entropy_loss + value_loss
+        loss = policy_loss + self.ent_coef * entropy_loss + (value_loss if self.use_baseline else 0.0)
 
-        self.policy.optimizer.zero_grad()
-        self.policy.value_optimizer.zero_grad()
+        # The two networks have their own parameters: one backward pass, then each optimizer's step, is the value
+        # update followed by the policy update of the book's loop
+        optimizers = [self.policy.optimizer] + ([self.policy.value_optimizer] if self.policy.value_optimizer else [])
+        for optimizer in optimizers:
+            optimizer.zero_grad()
         loss.backward()
         self._clip_gradients(self.policy.policy_parameters)
         self._clip_gradients(self.policy.value_parameters)
-        self.policy.optimizer.step()
-        self.policy.value_optimizer.step()
+        for optimizer in optimizers:
+            optimizer.step()
+        return dict(
+            policy_loss=policy_loss.detach(),
+            value_loss=value_loss.detach(),
+            entropy_loss=entropy_loss.detach(),
+            values=values.detach(),
+        )
+
+    def train(self) -> None:
+        """Update both networks on every complete episode in the buffer (``update_mode``: batch mean or per step)."""
+        self.policy.set_training_mode(True)
+        schedules = [(self.policy.optimizer, self.lr_schedule, "train/learning_rate")]
+        if self.policy.value_optimizer is not None:
+            schedules.append((self.policy.value_optimizer, self.value_lr_schedule, "train/value_learning_rate"))
+        self._update_learning_rates(schedules)
+        batch = self._training_batch()
+        if batch is None:
+            return
+        returns = batch.targets
+
+        if self.update_mode == "batch":
+            steps = [self._gradient_step(batch.observations, batch.actions, returns, batch.episode_steps)]
+        else:
+            # The book's loop over each episode's steps t = 0, …, T − 1, in the order they were taken (with several
+            # envs, the episodes' steps interleave in time order)
+            steps = []
+            for index in range(len(returns)):
+                one = slice(index, index + 1)
+                observations = select(batch.observations, one)  # type: ignore[arg-type]
+                steps.append(self._gradient_step(observations, batch.actions[one], returns[one], batch.episode_steps[one]))  # type: ignore[arg-type]
 
         self.rollout_buffer.mark_trained(batch.trained)
-        self._n_updates += 1
+        self._n_updates += len(steps)
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         # Every episode in the buffer is held from its first step (t = 0)
         self.logger.record("train/n_episodes", int((batch.episode_steps == 0).sum()))
-        self.logger.record("train/policy_loss", policy_loss.item())
-        self.logger.record("train/value_loss", value_loss.item())
-        self.logger.record("train/entropy_loss", entropy_loss.item())
-        self.logger.record(
-            "train/explained_variance", explained_variance(values.detach().cpu().numpy(), returns.cpu().numpy())
-        )
+        self.logger.record("train/policy_loss", th.stack([step["policy_loss"] for step in steps]).mean().item())
+        self.logger.record("train/entropy_loss", th.stack([step["entropy_loss"] for step in steps]).mean().item())
+        if self.use_baseline:
+            values = th.cat([step["values"] for step in steps])
+            self.logger.record("train/value_loss", th.stack([step["value_loss"] for step in steps]).mean().item())
+            self.logger.record("train/explained_variance", explained_variance(values.cpu().numpy(), returns.cpu().numpy()))
         if hasattr(self.policy, "log_std"):
             self.logger.record("train/std", th.exp(self.policy.log_std).mean().item())
 
@@ -274,4 +342,5 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         )
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
-        return ["policy", "policy.optimizer", "policy.value_optimizer"], []
+        optimizers = ["policy.optimizer"] + (["policy.value_optimizer"] if self.use_baseline else [])
+        return ["policy", *optimizers], []

@@ -11,7 +11,7 @@ from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor
 
 from sb3_classic.common.buffers import TrainingBatch, select
 from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
-from sb3_classic.common.returns import epsilon_greedy_expectation, nstep_targets
+from sb3_classic.common.returns import epsilon_greedy_expectation, greedy_random_ties, nstep_targets
 from sb3_classic.common.schedules import ExponentialDecay
 from sb3_classic.common.utils import check_choice, check_positive_int, check_range
 from sb3_classic.sarsa.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, SARSAPolicy
@@ -29,11 +29,31 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     action the agent actually took, with no bootstrap past a termination: w ← w + α[G_{t:t+n} − q̂(S_t, A_t, w)]
     ∇q̂(S_t, A_t, w) (eq. 10.5). The gradient does not flow through the target (semi-gradient).
 
-    Updates are batched: every ``train_freq`` steps per env, ``gradient_steps`` gradient steps on the mean loss of
-    every transition whose target has become known. A transition whose n steps are not all taken yet waits for a later
-    update, so every target is a full n-step return, whatever ``train_freq`` is; ``train_freq=1, gradient_steps=1``
-    with one env and plain SGD (``policy_kwargs=dict(optimizer_class=th.optim.SGD)``) is the book's per-step
-    algorithm.
+    Every ``train_freq`` steps per env, an update trains on every transition whose target has become known. A
+    transition whose n steps are not all taken yet waits for a later update, so every target is a full n-step return,
+    whatever ``train_freq`` is. ``update_mode`` says how an update applies them:
+
+    - ``"batch"`` (the default): ``gradient_steps`` gradient steps on the *mean* loss of the transitions, as DQN does
+      with a minibatch. Each transition then moves w by α/B of its own step for a batch of B, and at an episode end
+      the last n transitions complete together and share one step;
+    - ``"per_step"``: each transition's own update w ← w + α[G − q̂]∇q̂ with the full step size α, one after the
+      other in time order (episode ends included), ``gradient_steps`` passes. With ``train_freq=1``, one env and
+      plain SGD (``policy_kwargs=dict(optimizer_class=th.optim.SGD)``) this is the book's algorithm exactly:
+      the box of §10.2, whose updates at the end of an episode are made one by one (τ = T − n + 1, …, T − 1).
+
+    The targets of an update are computed with the weights at its start. With ``train_freq=1`` and one env, the
+    transitions that complete together are those of an episode's end, whose targets do not bootstrap, so the
+    per-step mode is the book's update to the last bit; with more envs or a longer ``train_freq`` the later
+    transitions of an update bootstrap from weights a few updates old.
+
+    Why batch by default: on the tuned settings (8 envs, 16 steps each, 8 gradient steps on 128 transitions) the
+    mean is what Adam and the learning rates were tuned for, and one gradient step on 128 transitions costs about as
+    much as one on a single transition: the per-step mode would take 128× more gradient steps for the same data
+    (the benchmarks' learning curves in ``benchmarks/results/learning.md`` are the batch mode's).
+
+    The greedy action breaks ties at random (as the book's ``argmax`` does), so that a q̂ initialised to a constant
+    does not always pick the first action; ``predict(deterministic=True)`` picks the first of tied actions, so that it
+    stays reproducible.
 
     At a time-limit truncation the target bootstraps from the final state with the expectation of q̂ under the
     current ε-greedy policy, (1 − ε) max_a q̂ + ε mean_a q̂: no action is taken there, and the expectation is the
@@ -50,7 +70,10 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     :param n_steps: the n of n-step returns (as DQN's ``n_steps``); the seed report's best: 10 on CartPole-v1,
         5 on Acrobot-v1
     :param train_freq: env steps per env between two updates
-    :param gradient_steps: gradient steps per update, on the same batch and targets
+    :param gradient_steps: gradient steps per update, on the same batch and targets (``update_mode="per_step"``:
+        passes over the transitions)
+    :param update_mode: ``"batch"`` (gradient steps on the mean loss of an update's transitions) or ``"per_step"``
+        (each transition's own update with the full step size, in time order: the book's), see above
     :param gamma: discount factor γ
     :param expected_sarsa: bootstrap from the ε-greedy expectation of q̂ instead of q̂ of the action taken
     :param exploration_schedule: ``"exponential"``: ε ← max(ε_final, ε · ``exploration_decay_rate``) at the end of
@@ -97,6 +120,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         n_steps: int = 3,
         train_freq: int = 16,
         gradient_steps: int = 8,
+        update_mode: str = "batch",
         gamma: float = 0.99,
         expected_sarsa: bool = False,
         exploration_schedule: str = "exponential",
@@ -144,6 +168,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         )
         self.train_freq = train_freq
         self.gradient_steps = gradient_steps
+        self.update_mode = update_mode
         self.expected_sarsa = expected_sarsa
         self.exploration_schedule = exploration_schedule
         self.exploration_initial_eps = exploration_initial_eps
@@ -168,6 +193,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         check_positive_int("n_steps", self.n_steps, hint="n=1 is one-step SARSA; the seed report used 5 and 10")
         check_positive_int("train_freq", self.train_freq)
         check_positive_int("gradient_steps", self.gradient_steps)
+        check_choice("update_mode", self.update_mode, ("batch", "per_step"))
         check_choice("exploration_schedule", self.exploration_schedule, ("exponential", "linear"))
         check_range("exploration_initial_eps", self.exploration_initial_eps, 0.0, 1.0)
         check_range("exploration_final_eps", self.exploration_final_eps, 0.0, 1.0)
@@ -218,7 +244,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         return np.where(explore, uniform, greedy_actions)
 
     def _sample_actions(self, obs: th.Tensor | dict[str, th.Tensor]) -> np.ndarray:
-        return self._epsilon_greedy(self.policy.q_net(obs).argmax(dim=1).cpu().numpy())
+        return self._epsilon_greedy(greedy_random_ties(self.policy.q_net(obs).cpu().numpy()))
 
     def _rollout_complete(self, n_steps: int, n_episodes: int) -> bool:
         return n_steps >= self.train_freq
@@ -289,6 +315,30 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             trained=trained,
         )
 
+    def _gradient_step(
+        self, observations: th.Tensor | dict[str, th.Tensor], actions: th.Tensor, targets: th.Tensor
+    ) -> th.Tensor:
+        """
+        One gradient step of q̂ on the mean loss of the given transitions.
+
+        :param observations: S_t, a batch of B
+        :param actions: A_t as indices, shape (B, 1)
+        :param targets: G_{t:t+n}, shape (B,)
+        :return: q̂(S_t, A_t) before the step, shape (B,), detached
+        """
+        q_predicted = self.policy.q_net(observations).gather(1, actions).flatten()
+        # w ← w + α [G_{t:t+n} − q̂(S_t, A_t, w)] ∇q̂(S_t, A_t, w) (S&B eq. 10.5): the gradient of ½(G − q̂)²
+        if self.loss_function == "mse":
+            loss = 0.5 * F.mse_loss(q_predicted, targets)
+        else:
+            loss = F.smooth_l1_loss(q_predicted, targets)
+        self.policy.optimizer.zero_grad()
+        loss.backward()
+        self._clip_gradients(self.policy.q_net.parameters())
+        self.policy.optimizer.step()
+        self._last_loss = loss.detach()
+        return q_predicted.detach()
+
     def train(self) -> None:
         """Update q̂ towards the n-step targets of every transition whose target is known and not trained on yet."""
         self.policy.set_training_mode(True)
@@ -299,25 +349,26 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         if batch is None:
             return
 
+        n_transitions = len(batch.targets)
+        q_first: list[th.Tensor] = []
         for gradient_step in range(self.gradient_steps):
-            q_predicted = self.policy.q_net(batch.observations).gather(1, batch.actions).flatten()
-            if gradient_step == 0:
-                q_mean = q_predicted.mean().item()
-            # w ← w + α [G_{t:t+n} − q̂(S_t, A_t, w)] ∇q̂(S_t, A_t, w) (S&B eq. 10.5): the gradient of ½(G − q̂)²
-            if self.loss_function == "mse":
-                loss = 0.5 * F.mse_loss(q_predicted, batch.targets)
-            else:
-                loss = F.smooth_l1_loss(q_predicted, batch.targets)
-            self.policy.optimizer.zero_grad()
-            loss.backward()
-            self._clip_gradients(self.policy.q_net.parameters())
-            self.policy.optimizer.step()
+            if self.update_mode == "batch":
+                q_predicted = self._gradient_step(batch.observations, batch.actions, batch.targets)
+                q_first += [q_predicted] if gradient_step == 0 else []
+                continue
+            # Each transition's own update, with the full step size α, in time order (the rows of the batch are
+            # time-major: step t of every env, then step t+1)
+            for index in range(n_transitions):
+                one = slice(index, index + 1)
+                q_predicted = self._gradient_step(select(batch.observations, one), batch.actions[one], batch.targets[one])  # type: ignore[arg-type]
+                q_first += [q_predicted] if gradient_step == 0 else []
 
         self.rollout_buffer.mark_trained(batch.trained)
-        self._n_updates += self.gradient_steps
+        n_steps = self.gradient_steps * (1 if self.update_mode == "batch" else n_transitions)
+        self._n_updates += n_steps
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
-        self.logger.record("train/loss", loss.item())
-        self.logger.record("train/q_mean", q_mean)
+        self.logger.record("train/loss", self._last_loss.item())
+        self.logger.record("train/q_mean", th.cat(q_first).mean().item())
         self.logger.record("train/target_mean", batch.targets.mean().item())
         self.logger.record("train/n_transitions", len(batch.targets))
 

@@ -14,9 +14,11 @@ from torch import nn
 from sb3_classic.common.policies import EnvActionsMixin
 from sb3_classic.common.torch_layers import (
     check_weight_init,
+    constant_init,
     kaiming_init,
     make_activation,
     optimizer_kwargs_with_defaults,
+    remove_biases,
 )
 
 
@@ -34,8 +36,11 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
     :param activation_fn: activation class of the hidden layers
     :param activation_kwargs: arguments of ``activation_fn``, e.g. ``dict(negative_slope=0.1)`` for ``nn.LeakyReLU``
     :param weight_init: ``"kaiming"`` (He initialisation of the hidden layers, the seed report's choice; the output
-        layer keeps PyTorch's default), ``"orthogonal"`` (SB3's A2C/PPO scheme: gain √2 hidden, 1 output) or
-        ``"default"`` (PyTorch's default everywhere, as SB3's DQN)
+        layer keeps PyTorch's default), ``"orthogonal"`` (SB3's A2C/PPO scheme: gain √2 hidden, 1 output),
+        ``"default"`` (PyTorch's default everywhere, as SB3's DQN), or a number: every weight starts at that constant
+        and every bias at 0 (the book's linear methods start at 0)
+    :param with_bias: whether the linear layers have a bias (SB3's ``create_mlp`` name). The book's linear q̂(s, a, w)
+        = wᵀx(s, a) is ``net_arch=[], with_bias=False, weight_init=0.0`` over features x such as ``TileCoding``'s
     :param features_extractor_class: features extractor to use
     :param features_extractor_kwargs: keyword arguments to pass to the features extractor
     :param normalize_images: whether to divide images by 255
@@ -55,7 +60,8 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         net_arch: list[int] | None = None,
         activation_fn: type[nn.Module] = nn.ReLU,
         activation_kwargs: dict[str, Any] | None = None,
-        weight_init: str = "kaiming",
+        weight_init: str | float = "kaiming",
+        with_bias: bool = True,
         features_extractor_class: type[BaseFeaturesExtractor] = FlattenExtractor,
         features_extractor_kwargs: dict[str, Any] | None = None,
         normalize_images: bool = True,
@@ -78,6 +84,7 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         self.activation_fn = activation_fn
         self.activation_kwargs = activation_kwargs
         self.weight_init = weight_init
+        self.with_bias = with_bias
 
         features_extractor = self.make_features_extractor()
         self.q_net = QNetwork(
@@ -89,9 +96,13 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             activation_fn=make_activation(activation_fn, activation_kwargs),
             normalize_images=normalize_images,
         )
+        if not with_bias:
+            remove_biases(self.q_net.q_net)
         layers = list(self.q_net.q_net)
         hidden, output = [features_extractor, *layers[:-1]], layers[-1]
-        if weight_init == "kaiming":
+        if not isinstance(weight_init, str):
+            constant_init([self.q_net], weight_init)
+        elif weight_init == "kaiming":
             kaiming_init(hidden, activation_fn, activation_kwargs)
         elif weight_init == "orthogonal":
             for module in hidden:
@@ -114,6 +125,7 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             activation_fn=self.activation_fn,
             activation_kwargs=self.activation_kwargs,
             weight_init=self.weight_init,
+            with_bias=self.with_bias,
             lr_schedule=self._dummy_schedule,  # not needed to load the policy alone
             optimizer_class=self.optimizer_class,
             optimizer_kwargs=self.optimizer_kwargs,

@@ -1,0 +1,252 @@
+"""
+The book's per-step updates, exactly: with a linear model and plain SGD, the weights after several episodes equal those
+of a direct NumPy transcription of the book's pseudocode (same features, same actions), to 1e-6 (issue 12).
+
+- n-step SARSA: the box "Episodic semi-gradient n-step Sarsa for estimating q̂ ≈ q*" (S&B §10.2), for n = 1, 4 and
+  an n longer than every episode;
+- REINFORCE: the boxes of §13.3 (plain, eq. 13.8) and §13.4 (with baseline), with and without the γ^t factor.
+
+The transcriptions below follow the boxes line by line, with the actions the algorithm took replayed (ε-greedy or
+sampled actions are the algorithm's business; the update is what is checked).
+"""
+
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from sb3_classic import REINFORCE, NStepSARSA
+
+N_ACTIONS, N_FEATURES = 3, 4
+# Episodes of 1 to 9 steps: shorter and longer than n, and a one-step episode
+LENGTHS = [5, 1, 7, 2, 9, 3, 6]
+
+
+class FeatureEpisodes(gym.Env[np.ndarray, int]):
+    """
+    Episodes of the given lengths, in turn, whose observations are fixed random feature vectors x(S_t) and whose
+    rewards are fixed random numbers R(episode, t, A_t); it records every (x(S_t), A_t, R_{t+1}).
+
+    :param lengths: the length of each episode
+    :param seed: the seed of the features and rewards
+    """
+
+    def __init__(self, lengths: list[int], seed: int = 0) -> None:
+        rng = np.random.default_rng(seed)
+        self.features = [rng.normal(size=(length, N_FEATURES)).astype(np.float32) for length in lengths]
+        self.rewards = [rng.normal(size=(length, N_ACTIONS)) for length in lengths]
+        self.lengths = lengths
+        self.observation_space = spaces.Box(-np.inf, np.inf, shape=(N_FEATURES,), dtype=np.float32)
+        self.action_space = spaces.Discrete(N_ACTIONS)
+        self.episodes: list[list[tuple[np.ndarray, int, float]]] = []
+        self._episode, self._t = -1, 0
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        self._episode, self._t = self._episode + 1, 0
+        self.episodes.append([])
+        return self.features[self._episode % len(self.lengths)][0], {}
+
+    def step(self, action: int) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+        k = self._episode % len(self.lengths)
+        reward = float(np.float32(self.rewards[k][self._t, int(action)]))
+        self.episodes[-1].append((self.features[k][self._t], int(action), reward))
+        self._t += 1
+        terminated = self._t == self.lengths[k]
+        obs = np.zeros(N_FEATURES, dtype=np.float32) if terminated else self.features[k][self._t]
+        return obs, reward, terminated, False, {}
+
+
+def linear_sgd(**policy_kwargs: Any) -> dict[str, Any]:
+    return dict(net_arch=[], with_bias=False, optimizer_class=th.optim.SGD, **policy_kwargs)
+
+
+# --- n-step SARSA (S&B §10.2) ----------------------------------------------------------------------------------------
+
+
+def reference_nstep_sarsa(
+    episodes: list[list[tuple[np.ndarray, int, float]]], w: np.ndarray, n: int, alpha: float, gamma: float
+) -> np.ndarray:
+    """The box of §10.2, with q̂(s, a, w) = w[a]ᵀx(s), replaying the recorded actions."""
+    w = w.astype(np.float64).copy()
+
+    def q_hat(x: np.ndarray, a: int) -> float:
+        return float(w[a] @ x)
+
+    for episode in episodes:
+        x = [step[0].astype(np.float64) for step in episode]
+        actions = [step[1] for step in episode]
+        rewards = [0.0] + [step[2] for step in episode]  # R_1, …, R_T at indices 1..T
+        big_t = len(episode)
+        t = 0
+        while True:
+            # (Take A_t, observe R_{t+1} and S_{t+1}: recorded; T is known once S_{t+1} is terminal)
+            tau = t - n + 1  # the time whose estimate is being updated
+            if tau >= 0:
+                g = sum(gamma ** (i - tau - 1) * rewards[i] for i in range(tau + 1, min(tau + n, big_t) + 1))
+                if tau + n < big_t:
+                    g += gamma**n * q_hat(x[tau + n], actions[tau + n])  # G ← G + γ^n q̂(S_{τ+n}, A_{τ+n}, w)
+                # w ← w + α [G − q̂(S_τ, A_τ, w)] ∇q̂(S_τ, A_τ, w)   (eq. 10.5)
+                w[actions[tau]] += alpha * (g - q_hat(x[tau], actions[tau])) * x[tau]
+            if tau == big_t - 1:
+                break
+            t += 1
+    return w
+
+
+@pytest.mark.parametrize("n", [1, 4, 12])
+def test_per_step_nstep_sarsa_is_the_books(n: int) -> None:
+    env = FeatureEpisodes(LENGTHS)
+    alpha, gamma = 0.05, 0.9
+    model = NStepSARSA(
+        "MlpPolicy",
+        DummyVecEnv([lambda: env]),
+        n_steps=n,
+        train_freq=1,
+        gradient_steps=1,
+        update_mode="per_step",
+        learning_rate=alpha,
+        gamma=gamma,
+        exploration_initial_eps=0.5,
+        exploration_final_eps=0.5,
+        policy_kwargs=linear_sgd(weight_init=0.1),
+        seed=0,
+        device="cpu",
+    )
+    w0 = model.policy.q_net.q_net[0].weight.detach().numpy().copy()
+    np.testing.assert_array_equal(w0, np.full((N_ACTIONS, N_FEATURES), 0.1, dtype=np.float32))
+    model.learn(2 * sum(LENGTHS))  # every episode twice, ending at an episode's end
+    episodes = env.episodes[: 2 * len(LENGTHS)]
+    assert len({a for episode in episodes for _, a, _ in episode}) == N_ACTIONS, "every action should have been taken"
+    expected = reference_nstep_sarsa(episodes, w0, n, alpha, gamma)
+    np.testing.assert_allclose(model.policy.q_net.q_net[0].weight.detach().numpy(), expected, rtol=0, atol=1e-6)
+    # Not the batch mean: the same data with update_mode="batch" ends elsewhere
+    assert np.abs(expected - w0).max() > 1e-2
+
+
+def test_batch_mode_differs_from_the_book_at_episode_ends() -> None:
+    """The batch mean gives each of the last n transitions α/n: the reason the per-step mode exists."""
+    results = {}
+    for mode in ("batch", "per_step"):
+        env = FeatureEpisodes(LENGTHS)
+        model = NStepSARSA(
+            "MlpPolicy", DummyVecEnv([lambda env=env: env]), n_steps=4, train_freq=1, gradient_steps=1, update_mode=mode,
+            learning_rate=0.05, gamma=0.9, policy_kwargs=linear_sgd(weight_init=0.0), seed=0, device="cpu",
+        )  # fmt: skip
+        model.learn(sum(LENGTHS))
+        results[mode] = model.policy.q_net.q_net[0].weight.detach().numpy()
+    assert np.abs(results["batch"] - results["per_step"]).max() > 1e-3
+
+
+def test_random_tie_breaking_in_the_behaviour_policy_only() -> None:
+    """A q̂ of zeros: the behaviour policy tries every action; predict(deterministic=True) stays reproducible."""
+    env = FeatureEpisodes(LENGTHS)
+    model = NStepSARSA(
+        "MlpPolicy", DummyVecEnv([lambda: env]), exploration_initial_eps=0.0, exploration_final_eps=0.0,
+        policy_kwargs=linear_sgd(weight_init=0.0), seed=0, device="cpu",
+    )  # fmt: skip
+    obs = th.as_tensor(np.stack([env.features[0][0]] * 300))
+    with th.no_grad():  # as in the rollout loop
+        sampled = model._sample_actions(obs)
+    assert set(sampled.tolist()) == set(range(N_ACTIONS))
+    assert np.bincount(sampled, minlength=N_ACTIONS).min() > 60
+    greedy, _ = model.predict(obs.numpy(), deterministic=True)
+    np.testing.assert_array_equal(greedy, np.zeros(300))
+
+
+# --- REINFORCE (S&B §13.3, §13.4) ------------------------------------------------------------------------------------
+
+
+def softmax(logits: np.ndarray) -> np.ndarray:
+    z = np.exp(logits - logits.max())
+    return z / z.sum()
+
+
+def reference_reinforce(
+    episodes: list[list[tuple[np.ndarray, int, float]]],
+    theta: np.ndarray,
+    w: np.ndarray | None,
+    alpha_theta: float,
+    alpha_w: float,
+    gamma: float,
+    gamma_t: bool,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """
+    The boxes of §13.3 (``w is None``: plain REINFORCE) and §13.4, with the soft-max linear policy
+    π(a|s, θ) ∝ exp(θ[a]ᵀx(s)) (eq. 13.2–13.3) and v̂(s, w) = wᵀx(s), replaying the recorded actions.
+    """
+    theta = theta.astype(np.float64).copy()
+    w = None if w is None else w.astype(np.float64).copy()
+    for episode in episodes:
+        big_t = len(episode)
+        for t in range(big_t):  # Loop for each step of the episode, t = 0, 1, …, T − 1
+            x, a = episode[t][0].astype(np.float64), episode[t][1]
+            g = sum(gamma ** (k - t - 1) * episode[k - 1][2] for k in range(t + 1, big_t + 1))  # G
+            delta = g if w is None else g - float(w @ x)  # δ ← G − v̂(S_t, w)
+            if w is not None:
+                w = w + alpha_w * delta * x  # w ← w + α^w δ ∇v̂(S_t, w)
+            # ∇ln π(a|s, θ) = x(s, a) − Σ_b π(b|s, θ) x(s, b)   (eq. 13.9), here (onehot(a) − π) ⊗ x(s)
+            grad_ln_pi = np.outer(np.eye(N_ACTIONS)[a] - softmax(theta @ x), x)
+            theta = theta + alpha_theta * (gamma**t if gamma_t else 1.0) * delta * grad_ln_pi
+    return theta, w
+
+
+@pytest.mark.parametrize("use_baseline", [True, False], ids=["with baseline", "plain"])
+@pytest.mark.parametrize("gamma_t_factor", [True, False], ids=["gamma^t", "no gamma^t"])
+def test_per_step_reinforce_is_the_books(use_baseline: bool, gamma_t_factor: bool) -> None:
+    env = FeatureEpisodes(LENGTHS)
+    alpha_theta, alpha_w, gamma = 0.05, 0.1, 0.9
+    model = REINFORCE(
+        "MlpPolicy",
+        DummyVecEnv([lambda: env]),
+        learning_rate=alpha_theta,
+        value_learning_rate=alpha_w,
+        update_mode="per_step",
+        use_baseline=use_baseline,
+        gamma=gamma,
+        gamma_t_factor=gamma_t_factor,
+        policy_kwargs=linear_sgd(weight_init=0.0),
+        seed=0,
+        device="cpu",
+    )
+    policy = model.policy
+    theta0 = policy.action_net.weight.detach().numpy().copy()
+    w0 = policy.value_net.weight.detach().numpy().copy()[0] if use_baseline else None
+    model.learn(2 * sum(LENGTHS))
+    episodes = env.episodes[: 2 * len(LENGTHS)]
+    assert sum(len(episode) for episode in episodes) == model.num_timesteps
+    theta, w = reference_reinforce(episodes, theta0, w0, alpha_theta, alpha_w, gamma, gamma_t_factor)
+    np.testing.assert_allclose(policy.action_net.weight.detach().numpy(), theta, rtol=0, atol=1e-6)
+    assert np.abs(theta - theta0).max() > 1e-2
+    if use_baseline:
+        assert w is not None
+        np.testing.assert_allclose(policy.value_net.weight.detach().numpy()[0], w, rtol=0, atol=1e-6)
+    else:
+        # Plain REINFORCE builds no value network, and saves one optimizer
+        assert policy.value_optimizer is None
+        assert all("value" not in name for name, _ in policy.named_parameters())
+        assert model._get_torch_save_params()[0] == ["policy", "policy.optimizer"]
+
+
+def test_plain_reinforce_saves_and_loads(tmp_path: Any) -> None:
+    model = REINFORCE("MlpPolicy", "CartPole-v1", use_baseline=False, policy_kwargs=dict(net_arch=[8]), seed=0, device="cpu")
+    model.learn(300)
+    model.save(tmp_path / "plain")
+    loaded = REINFORCE.load(tmp_path / "plain", env=model.get_env(), device="cpu")
+    assert not loaded.use_baseline and loaded.policy.value_optimizer is None
+    obs = np.zeros((5, 4), dtype=np.float32)
+    np.testing.assert_array_equal(loaded.predict(obs, deterministic=True)[0], model.predict(obs, deterministic=True)[0])
+    with pytest.raises(ValueError, match="use_baseline=False"):
+        loaded.policy.predict_values(th.zeros(1, 4))
+    loaded.learn(200)
+
+
+def test_per_step_and_normalize_advantage_are_refused() -> None:
+    with pytest.raises(ValueError, match="normalize_advantage=True .* update_mode='batch'"):
+        REINFORCE("MlpPolicy", "CartPole-v1", update_mode="per_step", normalize_advantage=True)
+    with pytest.raises(ValueError, match="update_mode='per-step' must be one of"):
+        NStepSARSA("MlpPolicy", "CartPole-v1", update_mode="per-step")
