@@ -26,7 +26,7 @@ N_ACTIONS, N_FEATURES = 3, 4
 LENGTHS = [5, 1, 7, 2, 9, 3, 6]
 
 
-class FeatureEpisodes(gym.Env[np.ndarray, int]):
+class FeatureEpisodes(gym.Env[np.ndarray, Any]):
     """
     Episodes of the given lengths, in turn, whose observations are fixed random feature vectors x(S_t) and whose
     rewards are fixed random numbers R(episode, t, A_t); it records every (x(S_t), A_t, R_{t+1}).
@@ -59,6 +59,16 @@ class FeatureEpisodes(gym.Env[np.ndarray, int]):
         terminated = self._t == self.lengths[k]
         obs = np.zeros(N_FEATURES, dtype=np.float32) if terminated else self.features[k][self._t]
         return obs, reward, terminated, False, {}
+
+
+def vec(env: gym.Env) -> DummyVecEnv:
+    """:return: ``env`` as the one env of a VecEnv"""
+    return DummyVecEnv([lambda: env])
+
+
+def weights(layer: Any) -> np.ndarray:
+    """:return: a copy of a linear layer's weight matrix"""
+    return layer.weight.detach().numpy().copy()
 
 
 def linear_sgd(**policy_kwargs: Any) -> dict[str, Any]:
@@ -104,7 +114,7 @@ def test_per_step_nstep_sarsa_is_the_books(n: int) -> None:
     alpha, gamma = 0.05, 0.9
     model = NStepSARSA(
         "MlpPolicy",
-        DummyVecEnv([lambda: env]),
+        vec(env),
         n_steps=n,
         train_freq=1,
         gradient_steps=1,
@@ -117,13 +127,13 @@ def test_per_step_nstep_sarsa_is_the_books(n: int) -> None:
         seed=0,
         device="cpu",
     )
-    w0 = model.policy.q_net.q_net[0].weight.detach().numpy().copy()
+    w0 = weights(model.policy.q_net.q_net[0]).copy()
     np.testing.assert_array_equal(w0, np.full((N_ACTIONS, N_FEATURES), 0.1, dtype=np.float32))
     model.learn(2 * sum(LENGTHS))  # every episode twice, ending at an episode's end
     episodes = env.episodes[: 2 * len(LENGTHS)]
     assert len({a for episode in episodes for _, a, _ in episode}) == N_ACTIONS, "every action should have been taken"
     expected = reference_nstep_sarsa(episodes, w0, n, alpha, gamma)
-    np.testing.assert_allclose(model.policy.q_net.q_net[0].weight.detach().numpy(), expected, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(weights(model.policy.q_net.q_net[0]), expected, rtol=0, atol=1e-6)
     # Not the batch mean: the same data with update_mode="batch" ends elsewhere
     assert np.abs(expected - w0).max() > 1e-2
 
@@ -134,11 +144,11 @@ def test_batch_mode_differs_from_the_book_at_episode_ends() -> None:
     for mode in ("batch", "per_step"):
         env = FeatureEpisodes(LENGTHS)
         model = NStepSARSA(
-            "MlpPolicy", DummyVecEnv([lambda env=env: env]), n_steps=4, train_freq=1, gradient_steps=1, update_mode=mode,
+            "MlpPolicy", vec(env), n_steps=4, train_freq=1, gradient_steps=1, update_mode=mode,
             learning_rate=0.05, gamma=0.9, policy_kwargs=linear_sgd(weight_init=0.0), seed=0, device="cpu",
         )  # fmt: skip
         model.learn(sum(LENGTHS))
-        results[mode] = model.policy.q_net.q_net[0].weight.detach().numpy()
+        results[mode] = weights(model.policy.q_net.q_net[0])
     assert np.abs(results["batch"] - results["per_step"]).max() > 1e-3
 
 
@@ -146,7 +156,7 @@ def test_random_tie_breaking_in_the_behaviour_policy_only() -> None:
     """A q̂ of zeros: the behaviour policy tries every action; predict(deterministic=True) stays reproducible."""
     env = FeatureEpisodes(LENGTHS)
     model = NStepSARSA(
-        "MlpPolicy", DummyVecEnv([lambda: env]), exploration_initial_eps=0.0, exploration_final_eps=0.0,
+        "MlpPolicy", vec(env), exploration_initial_eps=0.0, exploration_final_eps=0.0,
         policy_kwargs=linear_sgd(weight_init=0.0), seed=0, device="cpu",
     )  # fmt: skip
     obs = th.as_tensor(np.stack([env.features[0][0]] * 300))
@@ -202,7 +212,7 @@ def test_per_step_reinforce_is_the_books(use_baseline: bool, gamma_t_factor: boo
     alpha_theta, alpha_w, gamma = 0.05, 0.1, 0.9
     model = REINFORCE(
         "MlpPolicy",
-        DummyVecEnv([lambda: env]),
+        vec(env),
         learning_rate=alpha_theta,
         value_learning_rate=alpha_w,
         update_mode="per_step",
@@ -214,17 +224,17 @@ def test_per_step_reinforce_is_the_books(use_baseline: bool, gamma_t_factor: boo
         device="cpu",
     )
     policy = model.policy
-    theta0 = policy.action_net.weight.detach().numpy().copy()
-    w0 = policy.value_net.weight.detach().numpy().copy()[0] if use_baseline else None
+    theta0 = weights(policy.action_net).copy()
+    w0 = weights(policy.value_net).copy()[0] if use_baseline else None
     model.learn(2 * sum(LENGTHS))
     episodes = env.episodes[: 2 * len(LENGTHS)]
     assert sum(len(episode) for episode in episodes) == model.num_timesteps
     theta, w = reference_reinforce(episodes, theta0, w0, alpha_theta, alpha_w, gamma, gamma_t_factor)
-    np.testing.assert_allclose(policy.action_net.weight.detach().numpy(), theta, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(weights(policy.action_net), theta, rtol=0, atol=1e-6)
     assert np.abs(theta - theta0).max() > 1e-2
     if use_baseline:
         assert w is not None
-        np.testing.assert_allclose(policy.value_net.weight.detach().numpy()[0], w, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(weights(policy.value_net)[0], w, rtol=0, atol=1e-6)
     else:
         # Plain REINFORCE builds no value network, and saves one optimizer
         assert policy.value_optimizer is None
@@ -237,7 +247,8 @@ def test_plain_reinforce_saves_and_loads(tmp_path: Any) -> None:
     model.learn(300)
     model.save(tmp_path / "plain")
     loaded = REINFORCE.load(tmp_path / "plain", env=model.get_env(), device="cpu")
-    assert not loaded.use_baseline and loaded.policy.value_optimizer is None
+    assert not loaded.use_baseline
+    assert loaded.policy.value_optimizer is None
     obs = np.zeros((5, 4), dtype=np.float32)
     np.testing.assert_array_equal(loaded.predict(obs, deterministic=True)[0], model.predict(obs, deterministic=True)[0])
     with pytest.raises(ValueError, match="use_baseline=False"):
@@ -246,7 +257,7 @@ def test_plain_reinforce_saves_and_loads(tmp_path: Any) -> None:
 
 
 def test_per_step_and_normalize_advantage_are_refused() -> None:
-    with pytest.raises(ValueError, match="normalize_advantage=True .* update_mode='batch'"):
+    with pytest.raises(ValueError, match=r"normalize_advantage=True .* update_mode='batch'"):
         REINFORCE("MlpPolicy", "CartPole-v1", update_mode="per_step", normalize_advantage=True)
     with pytest.raises(ValueError, match="update_mode='per-step' must be one of"):
         NStepSARSA("MlpPolicy", "CartPole-v1", update_mode="per-step")
