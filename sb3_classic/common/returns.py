@@ -12,6 +12,8 @@ Every array is indexed ``[t, env]`` over the steps a buffer holds, in the order 
 An entry whose return depends on steps not taken yet is flagged incomplete; its value is meaningless.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 
 
@@ -40,6 +42,60 @@ def discounted_returns(rewards: np.ndarray, dones: np.ndarray, next_values: np.n
     return returns
 
 
+class NStepWindows(NamedTuple):
+    """
+    The n-step window of every stored transition (S&B eq. 10.4), all of shape (n_steps_stored, n_envs):
+    G_{t:t+n} = ``reward_sums[t]`` + ``bootstrap_discounts[t]`` × (the bootstrap value after step ``stop_rows[t]``).
+    """
+
+    reward_sums: np.ndarray  #: R_{t+1} + γR_{t+2} + … over the window's rewards, float32
+    stop_rows: np.ndarray  #: the step whose reward is the window's last: its episode's end, or t + n − 1 (int64)
+    bootstrap_discounts: np.ndarray  #: γ^K for a window of K rewards (float32)
+    complete: np.ndarray  #: whether the target is known (bool)
+
+
+def nstep_windows(rewards: np.ndarray, dones: np.ndarray, gamma: float, n_steps: int) -> NStepWindows:
+    """
+    The windows of n-step returns of semi-gradient n-step SARSA (Sutton & Barto §10.2, eq. 10.4): the target of step t
+    sums the rewards R_{t+1}, …, R_{t+K} with K = n, or fewer where the episode ends first, and bootstraps after its
+    last step (0 after a termination, the final state's value after a time-limit truncation, q̂(S_{t+n}, A_{t+n})
+    otherwise). Vectorised over t, k and envs (one pass of a dozen array operations, whatever n).
+
+    A target is complete when the episode ended within its n steps, or when step t+n has been taken (so that
+    A_{t+n}, and q̂(S_{t+n}, A_{t+n}), is known). Incomplete targets are never shortened: the caller keeps those
+    transitions until the steps they need arrive.
+
+    :param rewards: R_{t+1}, shape (n_steps_stored, n_envs)
+    :param dones: whether the episode ended with step t, shape (n_steps_stored, n_envs)
+    :param gamma: discount factor γ
+    :param n_steps: the n of n-step returns, n ≥ 1
+    :return: the windows (see ``NStepWindows``)
+    """
+    length = len(rewards)
+    steps = np.arange(length)
+    # Step t + k of the k-th reward of target t (k = 0, …, n − 1), where it has been taken
+    rows = steps[:, None] + np.arange(n_steps)[None, :]
+    taken = rows < length
+    rows = np.minimum(rows, length - 1)
+    ends = dones[rows] & taken[..., None]  # (t, k, env): the episode ended with step t + k
+    # The k-th reward belongs to the target if step t + k was taken and no episode end came before it
+    included = taken[..., None] & (np.cumsum(ends, axis=1) - ends == 0)
+    discounts = (gamma ** np.arange(n_steps, dtype=np.float64))[None, :, None]
+    # R_{t+1} + γR_{t+2} + … + γ^{K−1}R_{t+K} (eq. 10.4 without its bootstrap term)
+    reward_sums = (np.where(included, discounts * rewards[rows], 0.0)).sum(axis=1)
+    n_rewards = included.sum(axis=1)  # K ≥ 1: the first reward is always there
+    ended = (ends & included).any(axis=1)
+    stop_rows = steps[:, None] + n_rewards - 1
+    # q̂(S_{t+n}, A_{t+n}) is known once step t+n has been taken; an episode end needs no next step
+    complete = ended | ((n_rewards == n_steps) & (stop_rows + 1 < length))
+    return NStepWindows(
+        reward_sums=reward_sums.astype(np.float32),
+        stop_rows=stop_rows,
+        bootstrap_discounts=(gamma**n_rewards).astype(np.float32),
+        complete=complete,
+    )
+
+
 def nstep_targets(
     rewards: np.ndarray, dones: np.ndarray, next_values: np.ndarray, gamma: float, n_steps: int
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -49,11 +105,8 @@ def nstep_targets(
     G_{t:t+n} = R_{t+1} + γ R_{t+2} + … + γ^{n−1} R_{t+n} + γ^n q̂(S_{t+n}, A_{t+n}),
 
     and G_{t:t+n} = G_t when the episode ends first (no bootstrap past a termination; a time-limit truncation
-    bootstraps from ``next_values`` at the step where it happened).
-
-    A target is complete when the episode ended within its n steps, or when step t+n has been taken (so that
-    q̂(S_{t+n}, A_{t+n}) is known). Incomplete targets are never shortened: the caller keeps those transitions
-    until the steps they need arrive.
+    bootstraps from ``next_values`` at the step where it happened). See ``nstep_windows`` for when a target is
+    complete.
 
     :param rewards: R_{t+1}, shape (n_steps_stored, n_envs)
     :param dones: whether the episode ended with step t, shape (n_steps_stored, n_envs)
@@ -63,27 +116,10 @@ def nstep_targets(
     :param n_steps: the n of n-step returns, n ≥ 1
     :return: the targets G_{t:t+n} and a boolean mask of the complete ones, both of shape (n_steps_stored, n_envs)
     """
-    length = len(rewards)
-    steps = np.arange(length)
-    targets = np.zeros(rewards.shape, dtype=np.float32)
-    complete = np.zeros(rewards.shape, dtype=bool)
-    # Targets still accumulating rewards: their episode has not ended in the steps added so far
-    alive = np.ones(rewards.shape, dtype=bool)
-    discount = 1.0  # γ^k
-    for k in range(n_steps):
-        # Add the (k+1)-th term for every target t, reading step t+k where it has been taken
-        taken = (steps + k < length)[:, None]
-        alive &= taken
-        rows = np.minimum(steps + k, length - 1)
-        targets += np.where(alive, discount * rewards[rows], 0.0)
-        # Stop at an episode end, or after n rewards: + γ^{k+1} × bootstrap value (0 after a termination)
-        stop = alive & (dones[rows] | (k == n_steps - 1))
-        targets += np.where(stop, discount * gamma * next_values[rows], 0.0)
-        # q̂(S_{t+k+1}, A_{t+k+1}) is known once step t+k+1 has been taken; an episode end needs no next step
-        complete |= stop & (dones[rows] | (steps + k + 1 < length)[:, None])
-        alive &= ~dones[rows]
-        discount *= gamma
-    return targets, complete
+    windows = nstep_windows(rewards, dones, gamma, n_steps)
+    bootstrap = np.take_along_axis(next_values, windows.stop_rows, axis=0)
+    targets = windows.reward_sums + windows.bootstrap_discounts * bootstrap.astype(np.float32)
+    return targets.astype(np.float32), windows.complete
 
 
 def epsilon_greedy_expectation(q_values: np.ndarray | float, epsilon: float) -> np.ndarray:

@@ -9,9 +9,9 @@ from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor
 
-from sb3_classic.common.buffers import TrainingBatch, select
+from sb3_classic.common.buffers import TrainingBatch, TrajectorySamples, select
 from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
-from sb3_classic.common.returns import epsilon_greedy_expectation, greedy_random_ties, nstep_targets
+from sb3_classic.common.returns import epsilon_greedy_expectation, greedy_random_ties, nstep_windows
 from sb3_classic.common.schedules import ExponentialDecay
 from sb3_classic.common.utils import check_choice, check_positive_int, check_range
 from sb3_classic.sarsa.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, SARSAPolicy
@@ -178,6 +178,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self.loss_function = loss_function
         # ε of the ε-greedy behaviour policy (SB3's DQN name); follows exploration_schedule
         self.exploration_rate = exploration_initial_eps
+        # q̂(S, ·) of the rollout loop's last step, the update count and the env steps when it was computed
+        self._rollout_q_values: tuple[np.ndarray, int, int] = (np.zeros(0), -1, -1)
         self._check_arguments()
         if _init_setup_model:
             self._setup_model()
@@ -244,7 +246,10 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         return np.where(explore, uniform, greedy_actions)
 
     def _sample_actions(self, obs: th.Tensor | dict[str, th.Tensor]) -> np.ndarray:
-        return self._epsilon_greedy(greedy_random_ties(self.policy.q_net(obs).cpu().numpy()))
+        q_values = self.policy.q_net(obs).cpu().numpy()
+        # Kept for the bootstrap of the next update, if no update comes in between (see _next_state_values)
+        self._rollout_q_values = (q_values, self._n_updates, self.num_timesteps)
+        return self._epsilon_greedy(greedy_random_ties(q_values))
 
     def _rollout_complete(self, n_steps: int, n_episodes: int) -> bool:
         return n_steps >= self.train_freq
@@ -279,41 +284,61 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
 
     def _training_batch(self) -> TrainingBatch | None:
         """
-        :return: every transition not trained on yet whose n-step target G_{t:t+n} is known, with that target
-            (None if there is none yet)
+        :return: every transition not trained on yet whose n-step target G_{t:t+n} is known, with that target, in
+            time order (None if there is none yet)
         """
         data = self.rollout_buffer.get()
-        n_rows, n_envs = data.rewards.shape
-        observations = obs_as_tensor(select(data.observations, np.ones((n_rows, n_envs), dtype=bool)), self.device)
-        actions = th.as_tensor(data.actions.reshape(-1, 1), device=self.device)
-        # Semi-gradient: the targets come from the current weights, without gradient
-        with th.no_grad():
-            q_values = self.policy.q_net(observations)
-            if self.expected_sarsa:
-                state_values = self._bootstrap_values(q_values).reshape(n_rows, n_envs)
-            else:
-                state_values = q_values.gather(1, actions).reshape(n_rows, n_envs).cpu().numpy()
-            # Bootstrap after step t from step t+1: q̂(S_{t+1}, A_{t+1}), or its ε-greedy expectation
-            next_values = np.zeros_like(data.rewards)
-            next_values[:-1] = state_values[1:]
-            # No bootstrap past a termination; a truncation bootstraps from its final state
-            next_values[data.dones] = 0.0
-            if data.truncated.any():
-                final_obs = obs_as_tensor(select(data.final_observations, data.truncated), self.device)
-                next_values[data.truncated] = self._bootstrap_values(self.policy.q_net(final_obs))
-        # G_{t:t+n} (S&B eq. 10.4)
-        targets, complete = nstep_targets(data.rewards, data.dones, next_values, self.gamma, self.n_steps)
-        trained = complete & data.pending
+        # G_{t:t+n} (S&B eq. 10.4) = the window's rewards + γ^K × its bootstrap value
+        windows = nstep_windows(data.rewards, data.dones, self.gamma, self.n_steps)
+        trained = windows.complete & data.pending
         if not trained.any():
             return None
-        flat_trained = th.as_tensor(trained.reshape(-1), device=self.device)
+        rows, envs = np.nonzero(trained)  # row-major: time order
+        stop_rows = windows.stop_rows[rows, envs]
+        bootstrap = np.zeros(len(rows), dtype=np.float32)
+        # Semi-gradient: the bootstrap values come from the current weights, without gradient, and only where a
+        # target needs one: no bootstrap past a termination, the final state's after a truncation
+        continuing = ~data.dones[stop_rows, envs]
+        truncated = data.truncated[stop_rows, envs]
+        with th.no_grad():
+            if continuing.any():
+                bootstrap[continuing] = self._next_state_values(data, stop_rows[continuing] + 1, envs[continuing])
+            if truncated.any():
+                final_obs = select(data.final_observations, (stop_rows[truncated], envs[truncated]))
+                bootstrap[truncated] = self._bootstrap_values(self.policy.q_net(obs_as_tensor(final_obs, self.device)))
+        targets = windows.reward_sums[rows, envs] + windows.bootstrap_discounts[rows, envs] * bootstrap
         return TrainingBatch(
-            observations=select(observations, flat_trained),  # type: ignore[arg-type]
-            actions=actions[flat_trained],
-            targets=th.as_tensor(targets[trained], device=self.device),
-            episode_steps=th.as_tensor(data.episode_steps[trained], device=self.device),
+            observations=obs_as_tensor(select(data.observations, (rows, envs)), self.device),
+            actions=th.as_tensor(data.actions[rows, envs].reshape(-1, 1), device=self.device),
+            targets=th.as_tensor(targets, device=self.device),
+            episode_steps=th.as_tensor(data.episode_steps[rows, envs], device=self.device),
             trained=trained,
         )
+
+    def _next_state_values(self, data: TrajectorySamples, rows: np.ndarray, envs: np.ndarray) -> np.ndarray:
+        """
+        :param data: the buffer's content
+        :param rows: the steps to bootstrap from
+        :param envs: their envs
+        :return: q̂(S, A) of the action taken there (SARSA), or Σ_a π(a|S) q̂(S, a) (Expected SARSA), float32
+        """
+        q_values = None
+        last_row = len(data.rewards) - 1
+        cached_q, cached_updates, cached_timesteps = self._rollout_q_values
+        if (
+            (rows == last_row).all()
+            and cached_updates == self._n_updates
+            and cached_timesteps + self.n_envs == self.num_timesteps
+        ):
+            # q̂(S, ·) of the last step's states, computed by the rollout loop with the same weights (no update since):
+            # with train_freq=1 this is every bootstrap of the per-step mode, which then needs one forward pass less
+            q_values = cached_q[envs]
+        else:
+            observations = obs_as_tensor(select(data.observations, (rows, envs)), self.device)
+            q_values = self.policy.q_net(observations).cpu().numpy()
+        if self.expected_sarsa:
+            return epsilon_greedy_expectation(q_values, self.exploration_rate).astype(np.float32)
+        return q_values[np.arange(len(rows)), data.actions[rows, envs]].astype(np.float32)
 
     def _gradient_step(
         self, observations: th.Tensor | dict[str, th.Tensor], actions: th.Tensor, targets: th.Tensor
@@ -371,6 +396,10 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self.logger.record("train/q_mean", th.cat(q_first).mean().item())
         self.logger.record("train/target_mean", batch.targets.mean().item())
         self.logger.record("train/n_transitions", len(batch.targets))
+
+    def _excluded_save_params(self) -> list[str]:
+        # A cache of the rollout loop's last forward pass, not training state
+        return [*super()._excluded_save_params(), "_rollout_q_values"]
 
     def learn(
         self: SelfNStepSARSA,
