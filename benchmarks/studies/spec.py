@@ -150,7 +150,8 @@ class StudySpec:
     :param budget: per run
     :param hyperparams: the base zoo entry
     :param variants: name → overrides of the base (in order)
-    :param readings: name → overrides applied on top of every variant (``STATED`` first, with none)
+    :param readings: name → overrides of the settings the source leaves unstated, applied on top of every variant
+        that has them (``STATED`` first, with none)
     :param claims: the claims under test
     :param threshold: the return that counts as solved (``episodes_to_threshold``)
     :param threshold_window: episodes of the moving average that must reach ``threshold``
@@ -177,8 +178,13 @@ class StudySpec:
     path: Path | None = field(default=None, compare=False)
 
     def zoo_entry(self, variant: str, reading: str = STATED) -> dict[str, Any]:
-        """:return: the zoo YAML entry of ``variant`` under ``reading``: the base, the variant's overrides, the reading's"""
-        entry = merge(merge(self.hyperparams, self.variants[variant]), self.readings[reading])
+        """
+        :return: the zoo YAML entry of ``variant`` under ``reading``: the base, the variant's overrides, then the
+            reading's, for the settings the variant has (a reading reinterprets a setting, it does not add one: a
+            variant without learning-rate decay is the same run under every reading of its factor)
+        """
+        entry = merge(self.hyperparams, self.variants[variant])
+        entry = merge(entry, {key: value for key, value in self.readings[reading].items() if key in entry})
         if isinstance(entry.get("policy_kwargs"), Mapping):
             entry["policy_kwargs"] = policy_kwargs_string(entry["policy_kwargs"])
         # The zoo requires it; the run's budget (and, with an episode budget, the callback that stops it) decides
