@@ -303,11 +303,14 @@ def write_studies_index(studies: Sequence[StudySpec], results_dir: Path, title: 
         verdict = row[3].split(" (")[0]
         counts[verdict] = counts.get(verdict, 0) + 1
     tally = ", ".join(f"{count} {verdict}" for verdict, count in sorted(counts.items()))
+    planned = [run.spec.key() for study in studies for run in study.runs()]
     lines = [
         f"# {title}",
         "",
         f"{len(rows)} claims: {tally}.",
         "",
+        f"The studies listed: {len(planned)} runs, {len(set(planned))} distinct (runs of the same settings, in several "
+        "studies or readings, share their cache entry).",
         f"Compute: {runs} runs, {hours:.1f} CPU hours (`learn()` and the final evaluation, one core per run), "
         "summed over the studies' results in this folder (they may come from several invocations: the cache resumes).",
         "",
