@@ -117,6 +117,10 @@ class RunSpec:
     :param n_eval_episodes: episodes per evaluation
     :param hyperparams_yaml: the zoo YAML entry used, as text (read once, so a YAML edited during a benchmark
         cannot make a run differ from its key)
+    :param max_episodes: an episode budget: training stops when this many episodes (all envs together) have ended,
+        and ``n_timesteps`` is only a cap (a study's budget in episodes, as the seed report's); None: the step budget
+    :param label: the run's name in progress displays and messages (default: algorithm, env and seed); not part of
+        the key, so runs of the same settings named differently share their cache entry
     """
 
     algo: str
@@ -126,6 +130,8 @@ class RunSpec:
     eval_freq: int
     n_eval_episodes: int
     hyperparams_yaml: str
+    max_episodes: int | None = None
+    label: str | None = None
 
     @classmethod
     def create(cls, algo: str, env_id: str, seed: int, n_timesteps: int, eval_freq: int, n_eval_episodes: int) -> "RunSpec":
@@ -155,13 +161,22 @@ class RunSpec:
             "hyperparams": self.hyperparams,
             "versions": code_versions(self.algo),
         }
+        if self.max_episodes is not None:
+            # Only when set, so that the keys of step-budget runs cached before it existed stay the same
+            content["max_episodes"] = self.max_episodes
         return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()[:16]
 
     def run_dir(self, cache_dir: Path) -> Path:
-        """:return: where the finished run is cached: ``<env>/<algo>/seed_<k>/<budget>-<key>``"""
-        return cache_dir / self.env_id / self.algo / f"seed_{self.seed}" / f"{self.n_timesteps}-{self.key()}"
+        """
+        :return: where the finished run is cached: ``<env>/<algo>/seed_<k>/<budget>-<key>``, the budget in env steps
+            or ``<N>ep`` for an episode budget
+        """
+        budget = f"{self.max_episodes}ep" if self.max_episodes is not None else str(self.n_timesteps)
+        return cache_dir / self.env_id / self.algo / f"seed_{self.seed}" / f"{budget}-{self.key()}"
 
     @property
     def name(self) -> str:
         """A short label for progress displays."""
-        return f"{LABELS[self.algo]} {self.env_id} seed {self.seed}"
+        if self.label is not None:
+            return self.label
+        return f"{LABELS.get(self.algo, self.algo)} {self.env_id} seed {self.seed}"

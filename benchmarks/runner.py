@@ -19,7 +19,7 @@ import torch as th
 import yaml
 from rl_zoo3.exp_manager import ExperimentManager
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
+from stable_baselines3.common.callbacks import BaseCallback, EvalCallback, StopTrainingOnMaxEpisodes
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import sync_envs_normalization
@@ -59,22 +59,35 @@ class ProgressCallback(BaseCallback):
     """
     Report ``num_timesteps`` to the parent process now and then.
 
+    With an episode budget, the run's progress is its episodes, reported in the units of the progress display (its
+    step cap): ``episodes / max_episodes × n_timesteps``, so that the bars show the fraction of the budget done.
+
     :param name: the run's label
     :param queue: where to put ``(name, num_timesteps)``
-    :param every: env steps between two reports
+    :param every: env steps (or their equivalent) between two reports
+    :param max_episodes: the run's episode budget, if it has one
+    :param n_timesteps: its step cap (with ``max_episodes``)
     """
 
-    def __init__(self, name: str, queue: ProgressQueue, every: int):
+    def __init__(self, name: str, queue: ProgressQueue, every: int, max_episodes: int | None = None, n_timesteps: int = 0):
         super().__init__()
         self.name = name
         self.queue = queue
         self.every = every
+        self.max_episodes = max_episodes
+        self.n_timesteps = n_timesteps
+        self._episodes = 0
         self._last = 0
 
     def _on_step(self) -> bool:
-        if self.num_timesteps - self._last >= self.every:
-            self._last = self.num_timesteps
-            self.queue.put((self.name, self.num_timesteps))
+        if self.max_episodes is None:
+            done = self.num_timesteps
+        else:
+            self._episodes += int(np.sum(self.locals["dones"]))
+            done = min(self._episodes, self.max_episodes) * self.n_timesteps // self.max_episodes
+        if done - self._last >= self.every:
+            self._last = done
+            self.queue.put((self.name, done))
         return True
 
 
@@ -307,22 +320,26 @@ def _train(spec: RunSpec, folder: Path, config: Path, queue: ProgressQueue | Non
     evaluation = TimedEvalCallback(
         eval_env,
         n_eval_episodes=spec.n_eval_episodes,
-        # Counted in calls, one per step of all envs (as the zoo does)
-        eval_freq=max(spec.eval_freq // n_envs, 1),
+        # Counted in calls, one per step of all envs (as the zoo does); eval_freq 0: only the final evaluation
+        eval_freq=max(spec.eval_freq // n_envs, 1) if spec.eval_freq > 0 else spec.n_timesteps + 1,
         # The callback keeps its results only with a log path (it writes evaluations.npz there)
         log_path=str(folder),
         deterministic=exp_manager.deterministic_eval,
         verbose=0,
     )
     callbacks: list[BaseCallback] = [*exp_manager.callbacks, evaluation]
+    if spec.max_episodes is not None:
+        # SB3's callback counts episodes per env (max_episodes × n_envs in all): at least the budget, all envs together
+        callbacks.append(StopTrainingOnMaxEpisodes(-(-spec.max_episodes // n_envs)))
     if queue is not None:
-        callbacks.append(ProgressCallback(spec.name, queue, every=max(spec.n_timesteps // 200, 1)))
+        every = max(spec.n_timesteps // 200, 1)
+        callbacks.append(ProgressCallback(spec.name, queue, every, spec.max_episodes, spec.n_timesteps))
 
     # model.learn, not exp_manager.learn: the zoo's swallows KeyboardInterrupt, and an interrupted run must not be cached
     start = time.perf_counter()
     model.learn(spec.n_timesteps, callback=callbacks)
     learn_wall_time = time.perf_counter() - start
-    if model.num_timesteps < spec.n_timesteps:
+    if spec.max_episodes is None and model.num_timesteps < spec.n_timesteps:
         raise RuntimeError(f"{spec.name} stopped at {model.num_timesteps} of {spec.n_timesteps} steps")
     final_eval_time = _final_evaluation(model, evaluation)
     assert model.env is not None
@@ -330,6 +347,11 @@ def _train(spec: RunSpec, folder: Path, config: Path, queue: ProgressQueue | Non
     eval_env.close()
 
     episodes = episodes_from_monitors(Path(exp_manager.save_path), n_envs)
+    if spec.max_episodes is not None and len(episodes) < spec.max_episodes:
+        raise RuntimeError(
+            f"{spec.name} reached its step cap ({spec.n_timesteps} env steps) after {len(episodes)} of its "
+            f"{spec.max_episodes} episodes: raise the cap"
+        )
     episodes.to_csv(folder / EPISODES_FILE, index=False)
     evaluations = evaluations_frame(
         evaluation.evaluations_timesteps, evaluation.evaluations_results, evaluation.evaluations_length
@@ -343,6 +365,7 @@ def _train(spec: RunSpec, folder: Path, config: Path, queue: ProgressQueue | Non
         "n_timesteps": spec.n_timesteps,
         "eval_freq": spec.eval_freq,
         "n_eval_episodes": spec.n_eval_episodes,
+        "max_episodes": spec.max_episodes,
         "key": spec.key(),
         "hyperparams": spec.hyperparams,
         "versions": code_versions(spec.algo),

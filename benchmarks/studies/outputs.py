@@ -1,0 +1,358 @@
+"""
+The outputs of a study, from its runs in the cache: per study a figure in the seed report's form (``<name>.png``),
+its table (``<name>.md``, ``<name>.csv``) and its verdicts (``<name>.json``); and ``STUDIES.md``, one row per claim.
+"""
+
+import json
+import math
+import shlex
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+import yaml
+
+from benchmarks.common import REPO_ROOT, code_versions
+from benchmarks.runner import EPISODES_FILE, RUN_FILE, load_run
+from benchmarks.studies import stats
+from benchmarks.studies.spec import STATED, StudyRun, StudySpec
+
+STUDIES_FILE = "STUDIES.md"
+NOT_RUN = "not yet run"
+
+
+@dataclass
+class StudyResults:
+    """
+    A study's runs found in the cache, and what follows from them.
+
+    :param study: the study
+    :param returns: per (reading, variant), the training returns, seeds × episodes
+    :param seeds: per (reading, variant), the seeds found
+    :param metrics: per (reading, variant), ``stats.seed_metrics``
+    :param verdicts: per reading, the result of each claim (absent where a variant has no run)
+    :param missing: the runs not in the cache
+    :param learn_seconds: the ``learn()`` time of the runs found, summed (one CPU core each)
+    """
+
+    study: StudySpec
+    returns: dict[tuple[str, str], np.ndarray] = field(default_factory=dict)
+    seeds: dict[tuple[str, str], list[int]] = field(default_factory=dict)
+    metrics: dict[tuple[str, str], dict[str, np.ndarray]] = field(default_factory=dict)
+    verdicts: dict[str, list[stats.ClaimResult]] = field(default_factory=dict)
+    missing: list[StudyRun] = field(default_factory=list)
+    learn_seconds: float = 0.0
+    n_runs: int = 0
+
+
+def load_study_results(study: StudySpec, cache_dir: Path) -> StudyResults:
+    """
+    :param study: the study
+    :param cache_dir: the harness's cache
+    :return: its runs found in ``cache_dir``, their metrics and the claims' verdicts
+    """
+    results = StudyResults(study)
+    frames: dict[tuple[str, str], list[pd.DataFrame]] = {}
+    for run in study.runs():
+        run_dir = run.spec.run_dir(cache_dir)
+        if not (run_dir / RUN_FILE).exists():
+            results.missing.append(run)
+            continue
+        summary = load_run(run_dir)
+        results.learn_seconds += float(summary["learn_time_s"]) + float(summary.get("eval_time_s", 0.0))
+        results.n_runs += 1
+        frames.setdefault((run.reading, run.variant), []).append(pd.read_csv(run_dir / EPISODES_FILE))
+        results.seeds.setdefault((run.reading, run.variant), []).append(run.seed)
+    for key, episodes in frames.items():
+        returns = stats.returns_matrix(episodes, study.budget.episodes)
+        results.returns[key] = returns
+        results.metrics[key] = stats.seed_metrics(returns, study.threshold, study.threshold_window)
+    for reading in study.readings:
+        variants = {variant: results.metrics.get((reading, variant)) for variant in study.variants}
+        judged = []
+        for claim in study.claims:
+            needed = (claim.variant, *claim.others)
+            if all(variants[variant] is not None for variant in needed):
+                judged.append(stats.judge(claim, {variant: variants[variant] for variant in needed}))  # type: ignore[misc]
+        results.verdicts[reading] = judged
+    return results
+
+
+def study_command(study: StudySpec, extra: Sequence[str] = ()) -> str:
+    """:return: the command that runs ``study`` (its path relative to the repository, where it is inside)"""
+    assert study.path is not None
+    path = study.path.resolve()
+    shown = path.relative_to(REPO_ROOT).as_posix() if path.is_relative_to(REPO_ROOT) else str(study.path)
+    return shlex.join(["python", "-m", "benchmarks.studies", shown, *extra])
+
+
+def summary_frame(results: StudyResults) -> pd.DataFrame:
+    """:return: one row per (reading, variant): seeds, and each metric's mean over seeds with its 95% interval"""
+    rows = []
+    for (reading, variant), metrics in results.metrics.items():
+        row: dict[str, Any] = {"reading": reading, "variant": variant, "seeds": len(results.seeds[(reading, variant)])}
+        row["episodes"] = results.returns[(reading, variant)].shape[1]
+        for metric in stats.METRIC_LABELS:
+            value = stats.interval(metrics[metric])
+            row[metric], row[f"{metric}_low"], row[f"{metric}_high"] = value.estimate, value.low, value.high
+        row["seeds_reaching"] = int(metrics["reached"].sum())
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def markdown_table(results: StudyResults) -> str:
+    """:return: the study's table in markdown (estimates with their 95% intervals)"""
+    frame = summary_frame(results)
+    readings = len(results.study.readings) > 1
+    header = ["Reading"] if readings else []
+    header += ["Variant", "Seeds", "Episodes", *stats.METRIC_LABELS.values(), "Seeds reaching"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for row in frame.itertuples(index=False):
+        values = row._asdict()
+        cells = [values["reading"]] if readings else []
+        cells += [f"`{values['variant']}`", str(values["seeds"]), str(values["episodes"])]
+        for metric in stats.METRIC_LABELS:
+            interval = stats.Interval(values[metric], values[f"{metric}_low"], values[f"{metric}_high"])
+            cells.append(interval.format())
+        cells.append(f"{values['seeds_reaching']}/{values['seeds']}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def plot_study(results: StudyResults, path: Path) -> Path:
+    """
+    The seed report's figure: training return per episode, the mean over seeds with its 95% bootstrap band, one
+    line per variant (a moving average of ``study.smooth`` episodes, of each seed before the mean); one panel per
+    reading.
+
+    :return: ``path``
+    """
+    study = results.study
+    readings = list(study.readings)
+    figure, axes = plt.subplots(1, len(readings), figsize=(6.4 * len(readings), 4.2), squeeze=False, sharey=True)
+    for axis, reading in zip(axes[0], readings, strict=True):
+        for variant in study.variants:
+            returns = results.returns.get((reading, variant))
+            if returns is None:
+                continue
+            mean, low, high = stats.episode_band(stats.moving_average(returns, study.smooth))
+            episodes = np.arange(1, len(mean) + 1)
+            (line,) = axis.plot(episodes, mean, label=f"{variant} ({returns.shape[0]} seeds)", linewidth=1.2)
+            axis.fill_between(episodes, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
+        axis.axhline(study.threshold, color="grey", linestyle=":", linewidth=1)
+        axis.set_xlabel("Episode")
+        axis.set_title(reading if len(readings) > 1 else study.env_id, fontsize=10)
+        axis.legend(fontsize=8, loc="best")
+        axis.grid(alpha=0.3)
+    smooth = f", moving average of {study.smooth} episodes" if study.smooth > 1 else ""
+    axes[0][0].set_ylabel(f"Training return (mean, 95% CI{smooth})")
+    figure.suptitle(f"{study.title}", fontsize=11)
+    figure.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+    return path
+
+
+def write_study(results: StudyResults, results_dir: Path, command: str, reduced: bool = False) -> Path:
+    """
+    Write ``<name>.png``, ``<name>.csv``, ``<name>.md`` and ``<name>.json`` of a study into ``results_dir``.
+
+    :param results: the study's results
+    :param results_dir: where
+    :param command: the command that produced them
+    :param reduced: whether seeds or budget were reduced from the study file's (not the study's result)
+    :return: the markdown file
+    """
+    study = results.study
+    results_dir.mkdir(parents=True, exist_ok=True)
+    figure = plot_study(results, results_dir / f"{study.name}.png")
+    summary_frame(results).to_csv(results_dir / f"{study.name}.csv", index=False)
+    claims = []
+    for reading, judged in results.verdicts.items():
+        for result in judged:
+            claims.append(
+                {"text": result.claim.text, "reading": reading, "verdict": result.verdict, "measured": result.measured}
+            )
+    record = {
+        "study": study.name,
+        "title": study.title,
+        "source": study.source,
+        "env_id": study.env_id,
+        "algo": study.algo,
+        "seeds": len(study.seeds),
+        "budget": study.budget.describe(),
+        "command": command,
+        "reduced": reduced,
+        "complete": not results.missing,
+        "runs": results.n_runs,
+        "missing_runs": len(results.missing),
+        "cpu_hours": results.learn_seconds / 3600,
+        "claims": claims,
+        "claim_texts": [claim.text for claim in study.claims],
+    }
+    (results_dir / f"{study.name}.json").write_text(json.dumps(record, indent=2) + "\n")
+    lines = [f"# {study.title}", ""]
+    if study.source:
+        lines += [f"Source: {study.source}.", ""]
+    if reduced:
+        lines += ["**Reduced run** (fewer seeds or a shorter budget than the study file's): not the study's result.", ""]
+    lines += [
+        "Produced by:",
+        "",
+        "```",
+        command,
+        "```",
+        "",
+        f"- {study.algo} on {study.env_id}, {len(study.seeds)} seeds per variant, {study.budget.describe()} per run "
+        f"({results.n_runs} runs found, {len(results.missing)} missing; {results.learn_seconds / 3600:.2f} CPU hours).",
+        f"- Threshold: {study.threshold:g}, reached when the mean of {study.threshold_window} consecutive training "
+        "episodes reaches it (episodes to threshold: the last episode of the first such window; seeds that never "
+        "reach it count as the episode budget, a lower bound).",
+        "- Intervals: 95% bootstrap over seeds (`scipy.stats.bootstrap`, BCa); verdicts by the rule of "
+        "[STUDIES.md](STUDIES.md).",
+        f"- Versions: {', '.join(f'{name} {version}' for name, version in code_versions(study.algo).items())}.",
+        "",
+        "## Claims",
+        "",
+    ]
+    for reading, judged in results.verdicts.items():
+        suffix = "" if reading == STATED else f" (reading `{reading}`)"
+        for result in judged:
+            lines.append(f"- **{result.verdict}**{suffix}: {result.claim.text}. Measured: {result.measured}.")
+    if not any(results.verdicts.values()):
+        lines.append(f"- {NOT_RUN}")
+    lines += [
+        "",
+        "## Table",
+        "",
+        markdown_table(results) if results.metrics else NOT_RUN,
+        "",
+        f"![{study.title}]({figure.name})",
+    ]
+    lines += [
+        "",
+        "## Settings",
+        "",
+        "The zoo YAML entry of each variant (as stated; readings apply their overrides on top):",
+        "",
+    ]
+    entries = {variant: _without_budget(study.zoo_entry(variant)) for variant in study.variants}
+    lines += ["```yaml", yaml.safe_dump(entries, sort_keys=False).rstrip(), "```"]
+    if len(study.readings) > 1:
+        readings = {name: overrides for name, overrides in study.readings.items() if name != STATED}
+        lines += ["", "Readings:", "", "```yaml", yaml.safe_dump(readings, sort_keys=False).rstrip(), "```"]
+    if study.notes:
+        lines += ["", "## Notes", "", study.notes]
+    path = results_dir / f"{study.name}.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+RULE = """Verdicts are decided by 95% bootstrap confidence intervals over seeds (`scipy.stats.bootstrap`, BCa, 10,000
+resamples; each variant's seeds resampled independently):
+
+- **better** (A beats B on a metric): the interval of A − B, oriented so that positive means A is better (lower is
+  better for episodes to threshold and for the spread over seeds). *supported* if it lies above 0, *reversed* if below
+  0, *too close to call* if it contains 0. Against several variants: supported if every comparison is, reversed if
+  every one is reversed, *not supported* if some are reversed, too close to call otherwise.
+- **similar** (A and B alike): *supported* if the interval of A − B lies within ± the claim's margin, *not supported* if
+  it excludes 0, too close to call otherwise.
+- **reaches** / **below** a level: the interval of A's metric lies at or beyond the level (*supported* / *not
+  supported*), short of it (the opposite), or across it (too close to call).
+
+Metrics per seed, from the training return of each episode (the Monitor's): the mean over all episodes of the budget,
+the mean over the last 100, and the episodes until the mean of 100 consecutive episodes first reaches the threshold
+(475 on CartPole-v1, −100 on Acrobot-v1; a seed that never does counts as the budget)."""
+
+
+def write_studies_index(studies: Sequence[StudySpec], results_dir: Path, title: str = "Studies") -> Path:
+    """
+    ``STUDIES.md``: one row per claim of ``studies`` and of every other study with results in ``results_dir``,
+    with its verdict (or "not yet run"), what was measured and the command that re-runs it; and the compute taken.
+
+    :return: its path
+    """
+    records: dict[str, dict[str, Any]] = {}
+    for path in sorted(results_dir.glob("*.json")):
+        record = json.loads(path.read_text())
+        if isinstance(record, dict) and "claims" in record and "study" in record:
+            records[record["study"]] = record
+    rows = []
+    listed = set()
+    for study in studies:
+        listed.add(study.name)
+        record = records.get(study.name)
+        rows += _claim_rows(study.name, study.source, [claim.text for claim in study.claims], record, study_command(study))
+    for name, record in records.items():
+        if name not in listed:
+            rows += _claim_rows(name, record.get("source", ""), record["claim_texts"], record, record["command"])
+    done = [record for record in records.values() if not record.get("reduced")]
+    runs = sum(record["runs"] for record in done)
+    hours = sum(record["cpu_hours"] for record in done)
+    counts: dict[str, int] = {}
+    for row in rows:
+        verdict = row[3].split(" (")[0]
+        counts[verdict] = counts.get(verdict, 0) + 1
+    tally = ", ".join(f"{count} {verdict}" for verdict, count in sorted(counts.items()))
+    planned = [run.spec.key() for study in studies for run in study.runs()]
+    lines = [
+        f"# {title}",
+        "",
+        f"{len(rows)} claims: {tally}.",
+        "",
+        f"The studies listed: {len(planned)} runs, {len(set(planned))} distinct (runs of the same settings, in several "
+        "studies or readings, share their cache entry).",
+        f"Compute: {runs} runs, {hours:.1f} CPU hours (`learn()` and the final evaluation, one core per run), "
+        "summed over the studies' results in this folder (they may come from several invocations: the cache resumes).",
+        "",
+        "| Source | Claim | Measured | Verdict | Command |",
+        "|---|---|---|---|---|",
+    ]
+    lines += ["| " + " | ".join(cell.replace("|", "\\|") for cell in row) + " |" for row in rows]
+    lines += ["", "## How verdicts are decided", "", RULE, ""]
+    path = results_dir / STUDIES_FILE
+    results_dir.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines))
+    return path
+
+
+def _claim_rows(
+    name: str, source: str, texts: Sequence[str], record: dict[str, Any] | None, command: str
+) -> list[tuple[str, str, str, str, str]]:
+    rows = []
+    for text in texts:
+        judged = [claim for claim in (record or {}).get("claims", []) if claim["text"] == text]
+        stated = [claim for claim in judged if claim["reading"] == STATED]
+        if record is None or not stated:
+            rows.append((source or name, text, "–", NOT_RUN, f"`{command}`"))
+            continue
+        verdict = stated[0]["verdict"]
+        measured = stated[0]["measured"]
+        others = [f"{claim['reading']}: {claim['verdict']}" for claim in judged if claim["reading"] != STATED]
+        if others:
+            measured += " Other readings: " + "; ".join(others) + "."
+        if not record.get("complete", True):
+            verdict += f" (partial: {record['missing_runs']} runs missing)"
+        if record.get("reduced"):
+            verdict += " (reduced run)"
+        rows.append((f"[{source or name}]({name}.md)", text, measured, verdict, f"`{command}`"))
+    return rows
+
+
+def cpu_hours(results: Sequence[StudyResults]) -> float:
+    """:return: the ``learn()`` hours of all the runs found"""
+    return math.fsum(result.learn_seconds for result in results) / 3600
+
+
+def _without_budget(entry: dict[str, Any]) -> dict[str, Any]:
+    # n_timesteps is the zoo's required key, set to the run's step cap: the budget is stated above
+    return {key: value for key, value in entry.items() if key != "n_timesteps"}

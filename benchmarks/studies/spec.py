@@ -1,0 +1,549 @@
+"""
+A study file: one env and algorithm, base hyperparameters in the zoo's YAML form, a few variants of them, seeds, a
+budget, and the claims under test. ``load_study`` reads and checks one; ``StudySpec.runs`` turns it into the
+harness's runs, one per (variant, reading, seed).
+
+The format (``benchmarks/studies/README.md`` has the long form)::
+
+    study: fig15-sarsa-cartpole-n           # a name (default: the file's stem)
+    title: Values of n, n-step SARSA on CartPole-v1
+    source: seed report Fig 15, §4.4.5      # where the claim comes from (optional)
+    env: CartPole-v1
+    algo: nstep_sarsa                       # a key of rl_zoo3.ALGOS
+    seeds: 10                               # seeds 0–9, or a list
+    budget: {episodes: 500}                 # or {steps: 100000}; {episodes: N, max_steps: M} caps the steps
+    hyperparams:                            # the base, as an entry of the zoo's YAML
+      policy: MlpPolicy
+      n_steps: 10
+      policy_kwargs: {net_arch: [128, 128]}  # a mapping (variants override its keys), or the zoo's string
+    vary: {n_steps: [1, 5, 10]}             # one axis: variants "n_steps=1", ...; or named `variants:`
+    claim:                                  # or `claims:`, a list
+      text: n = 10 beats n = 1 and n = 5
+      kind: better                          # better | similar | reaches | below
+      variant: n_steps=10
+      others: [n_steps=1, n_steps=5]
+      metric: mean_return                   # mean_return | last_100_return | episodes_to_threshold
+    readings:                               # optional: settings the source leaves unstated, run as alternatives
+      steplr_factor_0.5: {lr_decay_factor: 0.5}
+    notes: |
+      What the source does not state, and the reading chosen.
+"""
+
+import dataclasses
+import difflib
+import inspect
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium
+import rl_zoo3
+import yaml
+
+from benchmarks.common import THRESHOLDS, RunSpec, register_algorithms
+
+#: Keys of a zoo YAML entry that the zoo consumes itself (not constructor arguments)
+ZOO_KEYS = frozenset(
+    {"n_envs", "normalize", "normalize_kwargs", "env_wrapper", "vec_env_wrapper", "callback", "frame_stack", "policy"}
+)
+METRICS = ("mean_return", "last_100_return", "episodes_to_threshold")
+CLAIM_KINDS = ("better", "similar", "reaches", "below")
+STATISTICS = ("mean", "std")
+#: The reading of a study's settings as its file states them (``readings`` adds others)
+STATED = "as stated"
+#: Episodes per final deterministic evaluation of a study's run (its only evaluation)
+EVAL_EPISODES = 10
+_TOP_KEYS = (
+    "study",
+    "title",
+    "source",
+    "env",
+    "algo",
+    "seeds",
+    "budget",
+    "hyperparams",
+    "vary",
+    "variants",
+    "readings",
+    "claim",
+    "claims",
+    "threshold",
+    "threshold_window",
+    "smooth",
+    "notes",
+)
+
+
+class StudyError(ValueError):
+    """A study file that cannot be run: the message names the file, each field that is wrong, and the fix."""
+
+
+@dataclass(frozen=True)
+class Budget:
+    """
+    :param episodes: training episodes per run (all envs together), or None
+    :param steps: env steps per run, or None (exactly one of the two is set)
+    :param max_steps: with ``episodes``, the env steps a run may not exceed (default: enough for every episode to
+        reach the env's time limit)
+    """
+
+    episodes: int | None = None
+    steps: int | None = None
+    max_steps: int | None = None
+
+    def describe(self) -> str:
+        """:return: e.g. ``500 episodes`` or ``100,000 env steps``"""
+        return f"{self.episodes:,} episodes" if self.episodes is not None else f"{self.steps:,} env steps"
+
+
+@dataclass(frozen=True)
+class Claim:
+    """
+    One claim under test, decided by bootstrap confidence intervals over seeds (``benchmarks.studies.stats``).
+
+    :param text: the claim in one line, as the source makes it
+    :param kind: ``better`` (``variant`` beats each of ``others`` on ``metric``), ``similar`` (the difference from
+        each of ``others`` is within ``margin``), ``reaches`` (``metric`` of ``variant`` at least ``value``),
+        ``below`` (``metric`` of ``variant`` below ``value``)
+    :param variant: the variant the claim is about
+    :param others: the variants it is compared with (``better``, ``similar``)
+    :param metric: a per-seed metric of ``METRICS``
+    :param statistic: ``mean`` (the mean over seeds) or ``std`` (their spread: "more consistent" claims, where a
+        lower spread is better)
+    :param margin: ``similar``: the largest difference that counts as similar, in the metric's units
+    :param value: ``reaches``/``below``: the level (default: the study's threshold)
+    """
+
+    text: str
+    kind: str
+    variant: str
+    others: tuple[str, ...] = ()
+    metric: str = "mean_return"
+    statistic: str = "mean"
+    margin: float | None = None
+    value: float | None = None
+
+
+@dataclass(frozen=True)
+class StudyRun:
+    """One run of a study: a variant under a reading, one seed, as the harness's ``RunSpec``."""
+
+    variant: str
+    reading: str
+    seed: int
+    spec: RunSpec
+
+
+@dataclass(frozen=True)
+class StudySpec:
+    """
+    A study, as loaded and checked by ``load_study``.
+
+    :param name: its name (file names of its results)
+    :param title: a title for its figure and table
+    :param source: where its claims come from
+    :param env_id: the Gymnasium env
+    :param algo: the algorithm (a key of ``rl_zoo3.ALGOS``)
+    :param seeds: the seeds of every variant
+    :param budget: per run
+    :param hyperparams: the base zoo entry
+    :param variants: name → overrides of the base (in order)
+    :param readings: name → overrides of the settings the source leaves unstated, applied on top of every variant
+        that has them (``STATED`` first, with none)
+    :param claims: the claims under test
+    :param threshold: the return that counts as solved (``episodes_to_threshold``)
+    :param threshold_window: episodes of the moving average that must reach ``threshold``
+    :param smooth: episodes of the moving average drawn in the figure (1: none)
+    :param notes: what the source leaves unstated, and the reading chosen
+    :param path: the file it was read from
+    """
+
+    name: str
+    title: str
+    source: str
+    env_id: str
+    algo: str
+    seeds: tuple[int, ...]
+    budget: Budget
+    hyperparams: dict[str, Any]
+    variants: dict[str, dict[str, Any]]
+    readings: dict[str, dict[str, Any]]
+    claims: tuple[Claim, ...]
+    threshold: float
+    threshold_window: int = 100
+    smooth: int = 10
+    notes: str = ""
+    path: Path | None = field(default=None, compare=False)
+
+    def zoo_entry(self, variant: str, reading: str = STATED) -> dict[str, Any]:
+        """
+        :return: the zoo YAML entry of ``variant`` under ``reading``: the base, the variant's overrides, then the
+            reading's, for the settings the variant has (a reading reinterprets a setting, it does not add one: a
+            variant without learning-rate decay is the same run under every reading of its factor)
+        """
+        entry = merge(self.hyperparams, self.variants[variant])
+        entry = merge(entry, {key: value for key, value in self.readings[reading].items() if key in entry})
+        if isinstance(entry.get("policy_kwargs"), Mapping):
+            entry["policy_kwargs"] = policy_kwargs_string(entry["policy_kwargs"])
+        # The zoo requires it; the run's budget (and, with an episode budget, the callback that stops it) decides
+        return {"n_timesteps": self.step_cap(), **entry}
+
+    def step_cap(self) -> int:
+        """:return: the env steps of each run: the budget in steps, or the cap of an episode budget"""
+        if self.budget.steps is not None:
+            return self.budget.steps
+        assert self.budget.episodes is not None
+        if self.budget.max_steps is not None:
+            return self.budget.max_steps
+        limit = gymnasium.spec(self.env_id).max_episode_steps
+        assert limit is not None, "checked by load_study"
+        n_envs = int(self.hyperparams.get("n_envs", 1))
+        # Every episode at the time limit, and the unfinished episodes of the other envs
+        return (self.budget.episodes + n_envs) * limit
+
+    def runs(self) -> list[StudyRun]:
+        """:return: every run of the study, seed by seed (an interrupted study has whole seeds done)"""
+        runs = []
+        for seed in self.seeds:
+            for reading in self.readings:
+                for variant in self.variants:
+                    label = f"{self.name} {variant}" + ("" if reading == STATED else f" [{reading}]") + f" seed {seed}"
+                    spec = RunSpec(
+                        algo=self.algo,
+                        env_id=self.env_id,
+                        seed=seed,
+                        n_timesteps=self.step_cap(),
+                        eval_freq=0,
+                        n_eval_episodes=EVAL_EPISODES,
+                        hyperparams_yaml=yaml.safe_dump(self.zoo_entry(variant, reading), sort_keys=True),
+                        max_episodes=self.budget.episodes,
+                        label=label,
+                    )
+                    runs.append(StudyRun(variant, reading, seed, spec))
+        return runs
+
+    def with_budget(self, seeds: int | None = None, episodes: int | None = None, steps: int | None = None) -> "StudySpec":
+        """:return: the same study with fewer (or more) seeds, or another budget (a reduced run: scratch results)"""
+        budget = self.budget
+        if episodes is not None:
+            budget = Budget(episodes=episodes, max_steps=budget.max_steps)
+        if steps is not None:
+            budget = Budget(steps=steps)
+        return dataclasses.replace(self, seeds=tuple(range(seeds)) if seeds is not None else self.seeds, budget=budget)
+
+
+def merge(base: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
+    """
+    :return: ``base`` with ``overrides``; a ``policy_kwargs`` mapping is merged key by key (a string replaces)
+    """
+    merged = dict(base)
+    for key, value in overrides.items():
+        if key == "policy_kwargs" and isinstance(value, Mapping) and isinstance(merged.get(key), Mapping):
+            merged[key] = {**merged[key], **value}
+        else:
+            merged[key] = value
+    return merged
+
+
+def policy_kwargs_string(kwargs: Mapping[str, Any]) -> str:
+    """
+    :param kwargs: ``policy_kwargs`` as a mapping; strings starting with ``nn.`` or ``th.`` are Python names
+        (``nn.LeakyReLU``), other strings are strings
+    :return: the zoo's form, ``"dict(net_arch=[64, 64], activation_fn=nn.ReLU)"`` (the zoo evaluates it)
+    """
+
+    def code(value: Any) -> str:
+        if isinstance(value, str) and value.startswith(("nn.", "th.")):
+            return value
+        if isinstance(value, Mapping):
+            return "dict(" + ", ".join(f"{key}={code(item)}" for key, item in value.items()) + ")"
+        if isinstance(value, list | tuple):
+            return "[" + ", ".join(code(item) for item in value) + "]"
+        return repr(value)
+
+    return code(kwargs)
+
+
+def algorithm_arguments(algo: str) -> set[str]:
+    """:return: the constructor arguments of ``rl_zoo3.ALGOS[algo]``"""
+    register_algorithms()
+    return set(inspect.signature(rl_zoo3.ALGOS[algo].__init__).parameters) - {"self", "env", "_init_setup_model"}
+
+
+class _Checker:
+    """Collects the problems of a study file, each naming its field and the fix."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.problems: list[str] = []
+
+    def fail(self, where: str, problem: str) -> None:
+        self.problems.append(f"{where}: {problem}")
+
+    def raise_if_any(self) -> None:
+        if self.problems:
+            lines = "\n  ".join(self.problems)
+            raise StudyError(f"{self.path}: {len(self.problems)} problem(s):\n  {lines}")
+
+    def positive_int(self, where: str, value: Any) -> int | None:
+        if isinstance(value, float) and value.is_integer() and value > 0:
+            return int(value)
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            self.fail(where, f"{value!r} is not a positive integer: write e.g. 500 (or !!float 5e5)")
+            return None
+        return value
+
+    def hyperparams(self, where: str, entry: Any, arguments: set[str], algo: str) -> dict[str, Any]:
+        if not isinstance(entry, Mapping):
+            self.fail(where, f"expected a mapping of hyperparameters (a zoo YAML entry), got {entry!r}")
+            return {}
+        for key, value in entry.items():
+            if key == "n_timesteps":
+                self.fail(f"{where}.n_timesteps", "the budget is the study's `budget:` (episodes or steps): remove it")
+            elif key not in arguments and key not in ZOO_KEYS:
+                close = difflib.get_close_matches(str(key), sorted(arguments | ZOO_KEYS), n=1)
+                hint = f"did you mean {close[0]!r}?" if close else f"see the arguments of {rl_zoo3.ALGOS[algo].__name__}"
+                self.fail(f"{where}.{key}", f"{algo} has no argument {key!r}: {hint}")
+            self.float_strings(f"{where}.{key}", value)
+            if key == "policy_kwargs" and not isinstance(value, str | Mapping):
+                self.fail(
+                    f"{where}.policy_kwargs", "write a mapping (net_arch: [64, 64], ...) or the zoo's string 'dict(...)'"
+                )
+        return dict(entry)
+
+    def float_strings(self, where: str, value: Any) -> None:
+        # YAML reads 1e-3 (no dot) as a string, and the zoo would pass it on as one
+        if isinstance(value, str):
+            try:
+                float(value)
+            except ValueError:
+                return
+            self.fail(where, f"{value!r} is read as a string by YAML: write !!float {value}, or {float(value)!r}")
+        elif isinstance(value, Mapping):
+            for key, item in value.items():
+                self.float_strings(f"{where}.{key}", item)
+        elif isinstance(value, list):
+            for index, item in enumerate(value):
+                self.float_strings(f"{where}[{index}]", item)
+
+
+def load_study(path: Path | str) -> StudySpec:
+    """
+    Read and check a study file.
+
+    :param path: the YAML file
+    :return: the study
+    :raise StudyError: naming every field that is wrong and how to fix it
+    """
+    path = Path(path)
+    check = _Checker(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as error:
+        raise StudyError(f"{path}: cannot be read as YAML: {error}") from error
+    if not isinstance(data, Mapping):
+        raise StudyError(f"{path}: a study file is a mapping (env:, algo:, hyperparams:, ...), got {type(data).__name__}")
+    for key in data:
+        if key not in _TOP_KEYS:
+            close = difflib.get_close_matches(str(key), _TOP_KEYS, n=1)
+            check.fail(
+                str(key), "unknown field" + (f": did you mean {close[0]!r}?" if close else f"; known: {', '.join(_TOP_KEYS)}")
+            )
+    for key in ("env", "algo", "budget", "hyperparams"):
+        if key not in data:
+            check.fail(key, "missing (a study needs env, algo, budget, hyperparams, variants or vary, and a claim)")
+    check.raise_if_any()
+
+    env_id = data["env"]
+    try:
+        env_spec = gymnasium.spec(env_id)
+    except gymnasium.error.Error as error:
+        check.fail("env", f"{env_id!r} is not a registered Gymnasium env ({error})")
+        env_spec = None
+    register_algorithms()
+    algo = data["algo"]
+    if algo not in rl_zoo3.ALGOS:
+        check.fail("algo", f"{algo!r} is not an algorithm of rl-zoo3: choose one of {', '.join(sorted(rl_zoo3.ALGOS))}")
+        check.raise_if_any()
+    arguments = algorithm_arguments(algo)
+
+    seeds = _seeds(check, data.get("seeds", 10))
+    budget = _budget(check, data["budget"])
+    uncapped = budget is not None and budget.episodes is not None and budget.max_steps is None
+    if uncapped and env_spec is not None and env_spec.max_episode_steps is None:
+        check.fail("budget.max_steps", f"{env_id} has no time limit: give a step cap, e.g. max_steps: 500000")
+    hyperparams = check.hyperparams("hyperparams", data["hyperparams"], arguments, algo)
+    variants = _variants(check, data, arguments, algo)
+    readings = _readings(check, data.get("readings") or {}, arguments, algo)
+    for name, overrides in [*variants.items(), *readings.items()]:
+        if isinstance(overrides.get("policy_kwargs"), Mapping) and isinstance(hyperparams.get("policy_kwargs"), str):
+            check.fail(f"{name}.policy_kwargs", "overrides keys of a string: write the base's policy_kwargs as a mapping")
+
+    threshold = data.get("threshold", THRESHOLDS.get(env_id))
+    if not isinstance(threshold, int | float) or isinstance(threshold, bool):
+        check.fail("threshold", f"{threshold!r}: give the return that counts as solved on {env_id}, e.g. threshold: 475")
+        threshold = math.nan
+    claims = _claims(check, data, variants, float(threshold))
+    window = check.positive_int("threshold_window", data.get("threshold_window", 100))
+    smooth = check.positive_int("smooth", data.get("smooth", 10))
+    check.raise_if_any()
+    assert budget is not None, "checked"
+    assert window is not None, "checked"
+    assert smooth is not None, "checked"
+    return StudySpec(
+        name=str(data.get("study", path.stem)),
+        title=str(data.get("title", path.stem)),
+        source=str(data.get("source", "")),
+        env_id=env_id,
+        algo=algo,
+        seeds=seeds,
+        budget=budget,
+        hyperparams=hyperparams,
+        variants=variants,
+        readings=readings,
+        claims=claims,
+        threshold=float(threshold),
+        threshold_window=window,
+        smooth=smooth,
+        notes=str(data.get("notes", "")).strip(),
+        path=path,
+    )
+
+
+def _seeds(check: _Checker, value: Any) -> tuple[int, ...]:
+    if isinstance(value, int) and not isinstance(value, bool):
+        if value < 1:
+            check.fail("seeds", f"{value}: give the number of seeds (at least 1; the studies use 10) or a list")
+        return tuple(range(value))
+    if isinstance(value, list) and value and all(isinstance(seed, int) and seed >= 0 for seed in value):
+        if len(set(value)) < len(value):
+            check.fail("seeds", f"{value}: a seed appears twice")
+        return tuple(value)
+    check.fail("seeds", f"{value!r}: give a number of seeds (seeds 0 to k − 1) or a list of non-negative integers")
+    return ()
+
+
+def _budget(check: _Checker, value: Any) -> Budget | None:
+    if not isinstance(value, Mapping) or set(value) - {"episodes", "steps", "max_steps"}:
+        check.fail("budget", f"{value!r}: write {{episodes: 500}} or {{steps: 100000}} (max_steps caps episodes)")
+        return None
+    if ("episodes" in value) == ("steps" in value):
+        check.fail("budget", "give one of episodes (the seed report's: 500 while tuning, 1000 for final models) and steps")
+        return None
+    if "steps" in value:
+        if "max_steps" in value:
+            check.fail("budget.max_steps", "caps an episode budget only: remove it, or budget in episodes")
+        steps = check.positive_int("budget.steps", value["steps"])
+        return Budget(steps=steps) if steps is not None else None
+    episodes = check.positive_int("budget.episodes", value["episodes"])
+    max_steps = check.positive_int("budget.max_steps", value["max_steps"]) if "max_steps" in value else None
+    return Budget(episodes=episodes, max_steps=max_steps) if episodes is not None else None
+
+
+def _variants(check: _Checker, data: Mapping[str, Any], arguments: set[str], algo: str) -> dict[str, dict[str, Any]]:
+    if ("vary" in data) == ("variants" in data):
+        check.fail(
+            "variants", "give exactly one of `vary:` (one axis: {n_steps: [1, 5, 10]}) and `variants:` (named overrides)"
+        )
+        return {}
+    if "vary" in data:
+        vary = data["vary"]
+        if not isinstance(vary, Mapping) or len(vary) != 1:
+            check.fail("vary", f"{vary!r}: one hyperparameter and its values, e.g. {{n_steps: [1, 5, 10]}}")
+            return {}
+        ((key, values),) = vary.items()
+        if not isinstance(values, list) or len(values) < 2:
+            check.fail(f"vary.{key}", f"{values!r}: a list of at least two values")
+            return {}
+        variants = {}
+        for value in values:
+            name = f"{key}={value}"
+            if name in variants:
+                check.fail(f"vary.{key}", f"{value!r} appears twice")
+            variants[name] = check.hyperparams(f"vary.{key}", {key: value}, arguments, algo)
+        return variants
+    raw = data["variants"]
+    if not isinstance(raw, Mapping) or not raw:
+        check.fail(
+            "variants", f"{raw!r}: a mapping of names to overrides, e.g. {{he: {{policy_kwargs: {{weight_init: kaiming}}}}}}"
+        )
+        return {}
+    return {
+        str(name): check.hyperparams(f"variants.{name}", overrides or {}, arguments, algo) for name, overrides in raw.items()
+    }
+
+
+def _readings(check: _Checker, raw: Any, arguments: set[str], algo: str) -> dict[str, dict[str, Any]]:
+    readings: dict[str, dict[str, Any]] = {STATED: {}}
+    if not isinstance(raw, Mapping):
+        check.fail("readings", "expected a mapping: name → overrides, e.g. {steplr_factor_0.5: {lr_decay_factor: 0.5}}")
+        return readings
+    for name, overrides in raw.items():
+        readings[str(name)] = check.hyperparams(f"readings.{name}", overrides, arguments, algo)
+    return readings
+
+
+def _claims(check: _Checker, data: Mapping[str, Any], variants: Mapping[str, Any], threshold: float) -> tuple[Claim, ...]:
+    if ("claim" in data) == ("claims" in data):
+        check.fail("claim", "give exactly one of `claim:` (one claim) and `claims:` (a list)")
+        return ()
+    raw: Sequence[Any] = [data["claim"]] if "claim" in data else data["claims"]
+    if not isinstance(raw, list | tuple) or not raw:
+        check.fail("claims", "a non-empty list of claims")
+        return ()
+    claims = []
+    for index, item in enumerate(raw):
+        where = "claim" if "claim" in data else f"claims[{index}]"
+        if not isinstance(item, Mapping):
+            check.fail(where, f"{item!r}: a mapping with text, kind, variant, ...")
+            continue
+        claims.append(_claim(check, where, item, variants, threshold))
+    return tuple(claims)
+
+
+def _claim(check: _Checker, where: str, item: Mapping[str, Any], variants: Mapping[str, Any], threshold: float) -> Claim:
+    unknown = set(item) - {"text", "kind", "variant", "others", "metric", "statistic", "margin", "value"}
+    if unknown:
+        check.fail(where, f"unknown keys {sorted(unknown)}")
+    kind = item.get("kind")
+    if kind not in CLAIM_KINDS:
+        check.fail(f"{where}.kind", f"{kind!r}: choose one of {', '.join(CLAIM_KINDS)}")
+    if not isinstance(item.get("text"), str) or not item["text"].strip():
+        check.fail(f"{where}.text", "the claim in one line, as its source makes it")
+    choices = ", ".join(map(repr, variants))
+    variant = item.get("variant")
+    if variant not in variants:
+        check.fail(f"{where}.variant", f"{variant!r} is not a variant: choose one of {choices}")
+    others = item.get("others", [])
+    others = [others] if isinstance(others, str) else list(others)
+    for other in others:
+        if other not in variants:
+            check.fail(f"{where}.others", f"{other!r} is not a variant: choose among {choices}")
+    if kind in ("better", "similar") and not others:
+        check.fail(f"{where}.others", f"a {kind!r} claim compares `variant` with `others`: name at least one")
+    if variant in others:
+        check.fail(f"{where}.others", f"{variant!r} is compared with itself")
+    metric = item.get("metric", "mean_return")
+    if metric not in METRICS:
+        check.fail(f"{where}.metric", f"{metric!r}: choose one of {', '.join(METRICS)}")
+    statistic = item.get("statistic", "mean")
+    if statistic not in STATISTICS:
+        check.fail(f"{where}.statistic", f"{statistic!r}: choose mean or std (the spread over seeds)")
+    margin = item.get("margin")
+    if kind == "similar" and (not isinstance(margin, int | float) or margin <= 0):
+        check.fail(f"{where}.margin", "a 'similar' claim needs the largest difference counted as similar, e.g. margin: 25")
+    value = item.get("value", threshold if kind in ("reaches", "below") and metric != "episodes_to_threshold" else None)
+    if kind in ("reaches", "below") and not isinstance(value, int | float):
+        check.fail(f"{where}.value", "the level to reach (or stay below), e.g. value: 475")
+    return Claim(
+        text=str(item.get("text", "")).strip(),
+        kind=str(kind),
+        variant=str(variant),
+        others=tuple(str(other) for other in others),
+        metric=str(metric),
+        statistic=str(statistic),
+        margin=float(margin) if isinstance(margin, int | float) else None,
+        value=float(value) if isinstance(value, int | float) else None,
+    )

@@ -1,0 +1,308 @@
+"""
+The statistics of a study: per-seed metrics of the training returns, 95% bootstrap confidence intervals over seeds
+(``scipy.stats.bootstrap``), and the verdict of each claim decided by the intervals.
+
+The rule (also in ``STUDIES.md``):
+
+- ``better`` (A beats B on a metric): the 95% interval of the difference A − B, bootstrapped over seeds (each
+  variant's seeds resampled independently), oriented so that positive means A is better. *supported* if it lies
+  above 0, *reversed* if below 0, *too close to call* if it contains 0. A claim against several variants is
+  supported if every comparison is, reversed if every one is reversed, *not supported* if some are reversed and
+  some not, too close to call otherwise.
+- ``similar`` (A and B alike): *supported* if the interval of A − B lies within ± the claim's margin, *not
+  supported* if it excludes 0, too close to call otherwise (it contains 0 but is wider than the margin).
+- ``reaches`` (A reaches a level): the interval of A's statistic; *supported* if it lies at or beyond the level,
+  *not supported* if it lies short of it, too close to call otherwise. ``below`` is the opposite claim.
+
+Statistics over seeds: ``mean`` (the mean over seeds) or ``std`` (their sample standard deviation: a claim of
+consistent learning across seeds, where lower is better).
+"""
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from benchmarks.studies.spec import Claim
+
+CONFIDENCE = 0.95
+N_RESAMPLES = 10_000
+#: Episodes of the "last episodes" metric
+LAST_EPISODES = 100
+SUPPORTED = "supported"
+NOT_SUPPORTED = "not supported"
+REVERSED = "reversed"
+TOO_CLOSE = "too close to call"
+METRIC_LABELS = {
+    "mean_return": "mean return (all episodes)",
+    "last_100_return": f"mean return (last {LAST_EPISODES} episodes)",
+    "episodes_to_threshold": "episodes to threshold",
+}
+
+
+@dataclass(frozen=True)
+class Interval:
+    """An estimate and its confidence interval (NaN bounds with fewer than two seeds)."""
+
+    estimate: float
+    low: float
+    high: float
+
+    def format(self, digits: int = 1) -> str:
+        """:return: e.g. ``412.3 [398.0, 425.1]``"""
+        if np.isnan(self.low):
+            return f"{self.estimate:.{digits}f}"
+        return f"{self.estimate:.{digits}f} [{self.low:.{digits}f}, {self.high:.{digits}f}]"
+
+
+def returns_matrix(episodes: Sequence[pd.DataFrame], n_episodes: int | None = None) -> np.ndarray:
+    """
+    :param episodes: per seed, its ``episodes.csv`` (one row per training episode, in end order)
+    :param n_episodes: episodes to keep (default: as many as every seed has)
+    :return: the training return of each episode, seeds × episodes
+    """
+    counts = [len(frame) for frame in episodes]
+    n = min(counts) if n_episodes is None else n_episodes
+    if min(counts) < n:
+        raise ValueError(f"a seed has only {min(counts)} episodes, fewer than the {n} asked for")
+    return np.stack([frame["return"].to_numpy(dtype=float)[:n] for frame in episodes])
+
+
+def moving_average(returns: np.ndarray, window: int) -> np.ndarray:
+    """
+    :param returns: ... × episodes
+    :param window: episodes
+    :return: the trailing mean over the last ``window`` episodes (fewer at the start), same shape
+    """
+    if window <= 1:
+        return returns
+    cumulative = np.cumsum(returns, axis=-1)
+    shifted = np.concatenate([np.zeros_like(cumulative[..., :window]), cumulative[..., :-window]], axis=-1)
+    counts = np.minimum(np.arange(1, returns.shape[-1] + 1), window)
+    return (cumulative - shifted) / counts
+
+
+def episodes_to_threshold(returns: np.ndarray, threshold: float, window: int) -> tuple[np.ndarray, np.ndarray]:
+    """
+    :param returns: seeds × episodes
+    :param threshold: the return that counts as solved
+    :param window: the mean of this many consecutive episodes must reach it (Gymnasium's "solved": 100)
+    :return: per seed, the episode (1-based) that completes the first such window, or the episode count if none
+        does (a lower bound: censored), and whether it did
+    """
+    n = returns.shape[1]
+    if n < window:
+        return np.full(returns.shape[0], float(n)), np.zeros(returns.shape[0], dtype=bool)
+    windows = moving_average(returns, window)[:, window - 1 :]
+    hit = windows >= threshold
+    reached = hit.any(axis=1)
+    first = np.where(reached, hit.argmax(axis=1) + window, n)
+    return first.astype(float), np.asarray(reached, dtype=bool)
+
+
+def seed_metrics(returns: np.ndarray, threshold: float, window: int) -> dict[str, np.ndarray]:
+    """
+    :param returns: seeds × episodes
+    :param threshold: see ``episodes_to_threshold``
+    :param window: see ``episodes_to_threshold``
+    :return: per metric of ``METRIC_LABELS``, its value for each seed; and ``reached`` (bool per seed)
+    """
+    first, reached = episodes_to_threshold(returns, threshold, window)
+    return {
+        "mean_return": returns.mean(axis=1),
+        "last_100_return": returns[:, -LAST_EPISODES:].mean(axis=1),
+        "episodes_to_threshold": first,
+        "reached": reached,
+    }
+
+
+def _statistic(name: str) -> Callable[..., Any]:
+    if name == "mean":
+        return np.mean
+    if name == "std":
+        return lambda values, axis=-1: np.std(values, axis=axis, ddof=1)
+    raise ValueError(f"statistic={name!r}: choose 'mean' or 'std'")
+
+
+def interval(values: np.ndarray, statistic: str = "mean", seed: int = 0) -> Interval:
+    """
+    :param values: one value per seed
+    :param statistic: ``mean`` or ``std``
+    :param seed: of the resampling
+    :return: the statistic and its 95% bootstrap interval (BCa; percentile where BCa is undefined)
+    """
+    values = np.asarray(values, dtype=float)
+    function = _statistic(statistic)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        estimate = float(function(values, axis=-1)) if len(values) else float("nan")
+    if len(values) < (3 if statistic == "std" else 2):
+        return Interval(estimate, float("nan"), float("nan"))
+    if np.ptp(values) == 0:
+        return Interval(estimate, estimate, estimate)
+    return _bootstrap((values,), lambda x, axis=-1: function(x, axis=axis), estimate, seed)
+
+
+def difference_interval(a: np.ndarray, b: np.ndarray, statistic: str = "mean", seed: int = 0) -> Interval:
+    """
+    :param a: one value per seed of a variant
+    :param b: the same of another (not paired: seeds are independent runs)
+    :param statistic: ``mean`` or ``std``
+    :param seed: of the resampling
+    :return: statistic(a) − statistic(b) and its 95% bootstrap interval
+    """
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    function = _statistic(statistic)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        estimate = float(function(a, axis=-1) - function(b, axis=-1)) if len(a) and len(b) else float("nan")
+    if min(len(a), len(b)) < (3 if statistic == "std" else 2):
+        return Interval(estimate, float("nan"), float("nan"))
+    if np.ptp(a) == 0 and np.ptp(b) == 0:
+        return Interval(estimate, estimate, estimate)
+    return _bootstrap((a, b), lambda x, y, axis=-1: function(x, axis=axis) - function(y, axis=axis), estimate, seed)
+
+
+def _bootstrap(data: tuple[np.ndarray, ...], statistic: Callable[..., np.ndarray], estimate: float, seed: int) -> Interval:
+    for method in ("BCa", "percentile"):
+        with np.errstate(invalid="ignore", divide="ignore"):
+            result = stats.bootstrap(
+                data,
+                statistic,
+                n_resamples=N_RESAMPLES,
+                confidence_level=CONFIDENCE,
+                method=method,
+                vectorized=True,
+                paired=False,
+                rng=np.random.default_rng(seed),
+            )
+        low, high = float(result.confidence_interval.low), float(result.confidence_interval.high)
+        if np.isfinite(low) and np.isfinite(high):
+            return Interval(estimate, low, high)
+    return Interval(estimate, float("nan"), float("nan"))
+
+
+def episode_band(returns: np.ndarray, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    :param returns: seeds × episodes
+    :param seed: of the resampling
+    :return: per episode, the mean over seeds and its 95% bootstrap interval (percentile, 2,000 resamples)
+    """
+    mean = returns.mean(axis=0)
+    if returns.shape[0] < 2:
+        return mean, mean, mean
+    result = stats.bootstrap(
+        (returns,),
+        np.mean,
+        n_resamples=2_000,
+        confidence_level=CONFIDENCE,
+        method="percentile",
+        vectorized=True,
+        axis=0,
+        rng=np.random.default_rng(seed),
+    )
+    return mean, np.asarray(result.confidence_interval.low), np.asarray(result.confidence_interval.high)
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """One comparison of a claim: ``variant`` against ``other`` (or against the level, ``other`` None)."""
+
+    other: str | None
+    interval: Interval
+    verdict: str
+
+
+@dataclass(frozen=True)
+class ClaimResult:
+    """A claim's verdict, its comparisons, and what was measured, in words."""
+
+    claim: Claim
+    verdict: str
+    comparisons: tuple[Comparison, ...]
+    measured: str
+
+
+def higher_is_better(claim: Claim) -> bool:
+    """:return: whether a larger value of the claim's statistic of its metric is better"""
+    return claim.statistic == "mean" and claim.metric != "episodes_to_threshold"
+
+
+def judge(claim: Claim, metrics: Mapping[str, Mapping[str, np.ndarray]]) -> ClaimResult:
+    """
+    :param claim: the claim
+    :param metrics: per variant, its ``seed_metrics``
+    :return: the verdict by the rule of this module's docstring
+    """
+    sign = 1.0 if higher_is_better(claim) else -1.0
+    ours = metrics[claim.variant][claim.metric]
+    what = METRIC_LABELS[claim.metric] + (", spread over seeds (std)" if claim.statistic == "std" else "")
+    comparisons = []
+    if claim.kind in ("better", "similar"):
+        parts = []
+        for other in claim.others:
+            difference = difference_interval(ours, metrics[other][claim.metric], claim.statistic)
+            if claim.kind == "better":
+                oriented = sorted((sign * difference.low, sign * difference.high))
+                verdict = _directional(oriented[0], oriented[1])
+            else:
+                assert claim.margin is not None
+                verdict = _similar(difference, claim.margin)
+            comparisons.append(Comparison(other, difference, verdict))
+            parts.append(f"{claim.variant} − {other}: {_signed(difference)} ({verdict})")
+        verdicts = [comparison.verdict for comparison in comparisons]
+        if all(verdict == SUPPORTED for verdict in verdicts):
+            overall = SUPPORTED
+        elif claim.kind == "better" and all(verdict == REVERSED for verdict in verdicts):
+            overall = REVERSED
+        elif any(verdict in (REVERSED, NOT_SUPPORTED) for verdict in verdicts):
+            overall = NOT_SUPPORTED
+        else:
+            overall = TOO_CLOSE
+        measured = f"{what}: " + "; ".join(parts)
+        if claim.kind == "similar":
+            measured += f" (similar: within ±{claim.margin:g})"
+    else:
+        assert claim.value is not None
+        value = interval(ours, claim.statistic)
+        # Distances beyond the level, positive on the claimed side of "reaches"
+        low, high = sorted((sign * (value.low - claim.value), sign * (value.high - claim.value)))
+        if np.isnan(low):
+            verdict = TOO_CLOSE
+        elif low >= 0:
+            verdict = SUPPORTED if claim.kind == "reaches" else NOT_SUPPORTED
+        elif high < 0:
+            verdict = NOT_SUPPORTED if claim.kind == "reaches" else SUPPORTED
+        else:
+            verdict = TOO_CLOSE
+        comparisons.append(Comparison(None, value, verdict))
+        overall = verdict
+        measured = f"{what} of {claim.variant}: {value.format()} against {claim.value:g}"
+    return ClaimResult(claim, overall, tuple(comparisons), measured)
+
+
+def _directional(low: float, high: float) -> str:
+    if np.isnan(low) or np.isnan(high):
+        return TOO_CLOSE
+    if low > 0:
+        return SUPPORTED
+    if high < 0:
+        return REVERSED
+    return TOO_CLOSE
+
+
+def _similar(difference: Interval, margin: float) -> str:
+    if np.isnan(difference.low):
+        return TOO_CLOSE
+    if -margin <= difference.low and difference.high <= margin:
+        return SUPPORTED
+    if difference.low > 0 or difference.high < 0:
+        return NOT_SUPPORTED
+    return TOO_CLOSE
+
+
+def _signed(value: Interval) -> str:
+    if np.isnan(value.low):
+        return f"{value.estimate:+.1f}"
+    return f"{value.estimate:+.1f} [{value.low:+.1f}, {value.high:+.1f}]"

@@ -1,0 +1,347 @@
+"""Hyperparameter studies (issue 14): the study file's checks, the statistics and verdicts, the episode budget, the
+seed report's study files, and a tiny study run end to end by the command."""
+
+import hashlib
+import inspect
+import io
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from benchmarks.common import REPO_ROOT, RunSpec, code_versions
+from benchmarks.runner import execute_run
+from benchmarks.studies import SEED_REPORT_STUDIES, stats
+from benchmarks.studies.spec import STATED, Claim, StudyError, load_study, policy_kwargs_string
+from sb3_classic import REINFORCE, NStepSARSA
+
+TINY = """
+title: Tiny
+env: CartPole-v1
+algo: nstep_sarsa
+seeds: 2
+budget: {episodes: 6}
+hyperparams:
+  policy: MlpPolicy
+  learning_rate: !!float 1e-3
+  train_freq: 1
+  gradient_steps: 1
+  policy_kwargs: {net_arch: [16], weight_init: kaiming}
+variants:
+  n1: {n_steps: 1}
+  n3: {n_steps: 3, policy_kwargs: {net_arch: [8]}}
+claim: {text: "n = 3 beats n = 1", kind: better, variant: n3, others: [n1]}
+threshold_window: 3
+smooth: 2
+"""
+
+
+def write_study(tmp_path: Path, text: str, name: str = "study.yml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_a_study_file_loads_into_runs(tmp_path: Path) -> None:
+    study = load_study(write_study(tmp_path, TINY))
+    assert study.name == "study"
+    assert list(study.variants) == ["n1", "n3"]
+    assert list(study.readings) == [STATED]
+    # policy_kwargs mappings merge key by key and become the zoo's string
+    assert study.zoo_entry("n3")["policy_kwargs"] == "dict(net_arch=[8], weight_init='kaiming')"
+    assert study.zoo_entry("n1")["policy_kwargs"] == "dict(net_arch=[16], weight_init='kaiming')"
+    runs = study.runs()
+    assert [(run.variant, run.seed) for run in runs] == [("n1", 0), ("n3", 0), ("n1", 1), ("n3", 1)]
+    spec = runs[1].spec
+    assert spec.max_episodes == 6
+    # Every episode at CartPole-v1's time limit (500), and the unfinished one of the env
+    assert spec.n_timesteps == (6 + 1) * 500
+    assert spec.hyperparams["n_steps"] == 3
+    assert spec.name == "study n3 seed 0"
+    assert len({run.spec.key() for run in runs}) == 4
+
+
+def test_policy_kwargs_string() -> None:
+    kwargs = {"net_arch": [256], "activation_fn": "nn.LeakyReLU", "activation_kwargs": {"negative_slope": 0.1}}
+    assert (
+        policy_kwargs_string(kwargs)
+        == "dict(net_arch=[256], activation_fn=nn.LeakyReLU, activation_kwargs=dict(negative_slope=0.1))"
+    )
+
+
+def test_readings_reinterpret_only_the_settings_a_variant_has(tmp_path: Path) -> None:
+    text = TINY.replace("claim:", "readings:\n  halved: {lr_decay_factor: 0.5, learning_rate: 0.002}\nclaim:").replace(
+        "n1: {n_steps: 1}", "n1: {n_steps: 1, lr_decay_every: 10, lr_decay_factor: 0.1}"
+    )
+    study = load_study(write_study(tmp_path, text))
+    assert study.zoo_entry("n1", "halved")["lr_decay_factor"] == 0.5
+    assert study.zoo_entry("n1", "halved")["learning_rate"] == 0.002
+    # n3 has no decay: the reading's factor is not added to it
+    assert "lr_decay_factor" not in study.zoo_entry("n3", "halved")
+    assert len(study.runs()) == 8
+    assert study.runs()[0].spec.label == "study n1 seed 0"
+    assert study.runs()[2].spec.label == "study n1 [halved] seed 0"
+
+
+@pytest.mark.parametrize(
+    ("change", "expected"),
+    [
+        (("hyperparams:", "hyperparms:"), ["hyperparms: unknown field: did you mean 'hyperparams'?", "hyperparams: missing"]),
+        (
+            ("train_freq: 1", "train_frequency: 1"),
+            ["hyperparams.train_frequency: nstep_sarsa has no argument", "'train_freq'"],
+        ),
+        (("learning_rate: !!float 1e-3", "learning_rate: 1e-3"), ["hyperparams.learning_rate: '1e-3' is read as a string"]),
+        (("budget: {episodes: 6}", "budget: {episodes: 6, steps: 100}"), ["budget: give one of episodes"]),
+        (("budget: {episodes: 6}", "budget: {episodes: -6}"), ["budget.episodes: -6 is not a positive integer"]),
+        (("others: [n1]", "others: [n2]"), ["claim.others: 'n2' is not a variant"]),
+        (("kind: better", "kind: beats"), ["claim.kind: 'beats': choose one of better, similar, reaches, below"]),
+        (("kind: better", "kind: similar"), ["claim.margin: a 'similar' claim needs"]),
+        (("seeds: 2", "seeds: [0, 0]"), ["seeds: [0, 0]: a seed appears twice"]),
+        (("env: CartPole-v1", "env: CartPole-v9"), ["env: 'CartPole-v9' is not a registered Gymnasium env"]),
+        (("algo: nstep_sarsa", "algo: sarsa"), ["algo: 'sarsa' is not an algorithm of rl-zoo3"]),
+        (("  policy: MlpPolicy", "  policy: MlpPolicy\n  n_timesteps: 1000"), ["hyperparams.n_timesteps: the budget is"]),
+        (("variants:", "vary: {n_steps: [1, 3]}\nvariants:"), ["variants: give exactly one of `vary:`"]),
+    ],
+)
+def test_study_file_errors_name_the_field_and_the_fix(tmp_path: Path, change: tuple[str, str], expected: list[str]) -> None:
+    old, new = change
+    assert old in TINY
+    path = write_study(tmp_path, TINY.replace(old, new, 1))
+    with pytest.raises(StudyError) as error:
+        load_study(path)
+    message = str(error.value)
+    assert str(path) in message
+    for part in expected:
+        assert part in message
+
+
+def test_study_file_errors_are_all_listed_at_once(tmp_path: Path) -> None:
+    text = (
+        TINY.replace("train_freq: 1", "train_frq: 1").replace("others: [n1]", "others: [n9]").replace("seeds: 2", "seeds: 0")
+    )
+    with pytest.raises(StudyError, match=r"3 problem\(s\)") as error:
+        load_study(write_study(tmp_path, text))
+    assert "did you mean 'train_freq'" in str(error.value)
+
+
+def test_vary_names_its_variants(tmp_path: Path) -> None:
+    text = TINY.replace(
+        "variants:\n  n1: {n_steps: 1}\n  n3: {n_steps: 3, policy_kwargs: {net_arch: [8]}}", "vary: {n_steps: [1, 3]}"
+    )
+    text = text.replace("variant: n3, others: [n1]", "variant: n_steps=3, others: [n_steps=1]")
+    study = load_study(write_study(tmp_path, text))
+    assert list(study.variants) == ["n_steps=1", "n_steps=3"]
+    assert study.zoo_entry("n_steps=3")["n_steps"] == 3
+
+
+# ---- statistics -------------------------------------------------------------------------------------------------
+
+
+def metrics_of(values: list[float] | np.ndarray, metric: str = "mean_return") -> dict[str, np.ndarray]:
+    return {metric: np.asarray(values, dtype=float)}
+
+
+def claim(kind: str = "better", **fields: object) -> Claim:
+    return Claim(text="A beats B", kind=kind, variant="A", others=() if kind in ("reaches", "below") else ("B",), **fields)  # type: ignore[arg-type]
+
+
+def test_verdicts_of_a_better_claim() -> None:
+    rng = np.random.default_rng(0)
+    high, low = 400 + rng.normal(0, 10, 10), 200 + rng.normal(0, 10, 10)
+    same = 300 + rng.normal(0, 30, 10)
+    assert stats.judge(claim(), {"A": metrics_of(high), "B": metrics_of(low)}).verdict == stats.SUPPORTED
+    assert stats.judge(claim(), {"A": metrics_of(low), "B": metrics_of(high)}).verdict == stats.REVERSED
+    # Two samples of the same distribution: the interval of the difference contains 0
+    other = 300 + rng.normal(0, 30, 10)
+    assert stats.judge(claim(), {"A": metrics_of(same), "B": metrics_of(other)}).verdict == stats.TOO_CLOSE
+    # Fewer episodes to the threshold is better
+    faster = claim(metric="episodes_to_threshold")
+    episodes = {"A": metrics_of(low, "episodes_to_threshold"), "B": metrics_of(high, "episodes_to_threshold")}
+    assert stats.judge(faster, episodes).verdict == stats.SUPPORTED
+    # A lower spread over seeds is better
+    consistent = claim(statistic="std")
+    tight, wide = 300 + rng.normal(0, 1, 10), 300 + rng.normal(0, 100, 10)
+    assert stats.judge(consistent, {"A": metrics_of(tight), "B": metrics_of(wide)}).verdict == stats.SUPPORTED
+
+
+def test_a_claim_against_several_variants_needs_each() -> None:
+    several = Claim(text="A beats B and C", kind="better", variant="A", others=("B", "C"))
+    data = {"A": metrics_of(np.arange(10.0) + 100), "B": metrics_of(np.arange(10.0)), "C": metrics_of(np.arange(10.0) + 100.5)}
+    result = stats.judge(several, data)
+    assert [comparison.verdict for comparison in result.comparisons] == [stats.SUPPORTED, stats.TOO_CLOSE]
+    assert result.verdict == stats.TOO_CLOSE
+    data["C"] = metrics_of(np.arange(10.0) + 200)
+    assert stats.judge(several, data).verdict == stats.NOT_SUPPORTED
+
+
+def test_verdicts_of_similar_reaches_and_below() -> None:
+    similar = claim("similar", margin=20.0)
+    base = np.linspace(290, 310, 10)
+    assert stats.judge(similar, {"A": metrics_of(base), "B": metrics_of(base + 2)}).verdict == stats.SUPPORTED
+    assert stats.judge(similar, {"A": metrics_of(base), "B": metrics_of(base + 100)}).verdict == stats.NOT_SUPPORTED
+    noisy = np.linspace(0, 600, 10)
+    assert stats.judge(similar, {"A": metrics_of(noisy), "B": metrics_of(noisy[::-1] + 5)}).verdict == stats.TOO_CLOSE
+    reaches = claim("reaches", value=475.0)
+    assert stats.judge(reaches, {"A": metrics_of(np.linspace(480, 500, 10))}).verdict == stats.SUPPORTED
+    assert stats.judge(reaches, {"A": metrics_of(np.linspace(100, 200, 10))}).verdict == stats.NOT_SUPPORTED
+    assert stats.judge(reaches, {"A": metrics_of(np.linspace(400, 550, 10))}).verdict == stats.TOO_CLOSE
+    below = claim("below", value=-100.0)
+    assert stats.judge(below, {"A": metrics_of(np.linspace(-300, -200, 10))}).verdict == stats.SUPPORTED
+    assert stats.judge(below, {"A": metrics_of(np.linspace(-90, -80, 10))}).verdict == stats.NOT_SUPPORTED
+
+
+def test_intervals() -> None:
+    values = np.arange(10.0)
+    interval = stats.interval(values)
+    assert interval.estimate == 4.5
+    assert 2.0 < interval.low < 4.5 < interval.high < 7.0
+    assert stats.interval(np.full(10, 3.0)) == stats.Interval(3.0, 3.0, 3.0)
+    assert np.isnan(stats.interval(np.array([1.0])).low)
+    difference = stats.difference_interval(values + 10, values)
+    assert difference.estimate == pytest.approx(10.0)
+    assert 5.0 < difference.low < 10.0 < difference.high < 15.0
+
+
+def test_episode_metrics() -> None:
+    returns = np.array(
+        [
+            [10.0, 20.0, 480.0, 490.0, 500.0, 500.0],
+            [10.0, 10.0, 10.0, 10.0, 500.0, 10.0],
+        ]
+    )
+    np.testing.assert_allclose(stats.moving_average(returns[:1], 2), [[10.0, 15.0, 250.0, 485.0, 495.0, 500.0]])
+    first, reached = stats.episodes_to_threshold(returns, 475.0, window=2)
+    # Seed 0: episodes 3 and 4 are the first window of 2 whose mean reaches 475; seed 1 never does (counted as 6)
+    assert first.tolist() == [4.0, 6.0]
+    assert reached.tolist() == [True, False]
+    metrics = stats.seed_metrics(returns, 475.0, window=2)
+    np.testing.assert_allclose(metrics["mean_return"], returns.mean(axis=1))
+    np.testing.assert_allclose(metrics["last_100_return"], returns.mean(axis=1))
+    mean, low, high = stats.episode_band(returns)
+    np.testing.assert_allclose(mean, returns.mean(axis=0))
+    assert (low <= mean).all()
+    assert (mean <= high).all()
+
+
+# ---- the harness's episode budget --------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("algo", "n_envs", "at_least"), [("nstep_sarsa", 1, 7), ("reinforce", 1, 7), ("reinforce", 2, 7)])
+def test_an_episode_budget_stops_training(algo: str, n_envs: int, at_least: int) -> None:
+    spec = RunSpec(
+        algo=algo,
+        env_id="CartPole-v1",
+        seed=0,
+        n_timesteps=100_000,
+        eval_freq=0,
+        n_eval_episodes=1,
+        hyperparams_yaml=f"n_timesteps: 100000\npolicy: MlpPolicy\nn_envs: {n_envs}\n",
+        max_episodes=7,
+        label="budget",
+    )
+    result = execute_run(spec)
+    episodes = pd.read_csv(io.BytesIO(result.files["episodes.csv"]))
+    if n_envs == 1:
+        assert len(episodes) == 7
+    else:
+        # SB3's callback counts ceil(7 / 2) = 4 per env: at least 7 in all, at most one more per env
+        assert 7 <= len(episodes) <= 8
+    assert result.summary["n_episodes"] == len(episodes)
+    if n_envs == 1:
+        assert result.summary["num_timesteps"] == episodes["length"].sum()
+    assert result.summary["max_episodes"] == 7
+    # Only the final evaluation (eval_freq 0)
+    assert json.loads(result.files["run.json"])["num_timesteps"] < 100_000
+    evaluations = pd.read_csv(io.BytesIO(result.files["evaluations.csv"]))
+    assert evaluations["eval_index"].unique().tolist() == [0]
+
+
+def test_step_budget_keys_are_unchanged() -> None:
+    """Runs cached before episode budgets existed keep their keys (and their folders)."""
+    spec = RunSpec("reinforce", "CartPole-v1", 3, 1000, 500, 2, "learning_rate: 0.003\npolicy: MlpPolicy\n")
+    content = {
+        "algo": "reinforce",
+        "env_id": "CartPole-v1",
+        "seed": 3,
+        "n_timesteps": 1000,
+        "eval_freq": 500,
+        "n_eval_episodes": 2,
+        "hyperparams": {"learning_rate": 0.003, "policy": "MlpPolicy"},
+        "versions": code_versions("reinforce"),
+    }
+    assert spec.key() == hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()[:16]
+    assert spec.run_dir(Path("c")).name == f"1000-{spec.key()}"
+    budgeted = RunSpec(
+        "reinforce", "CartPole-v1", 3, 1000, 500, 2, "learning_rate: 0.003\npolicy: MlpPolicy\n", max_episodes=5
+    )
+    assert budgeted.key() != spec.key()
+    assert budgeted.run_dir(Path("c")).name == f"5ep-{budgeted.key()}"
+
+
+# ---- the seed report's study files -------------------------------------------------------------------------------
+
+#: The report's comparisons (Figs 2–7, 9–17, 20–23, 25–29) and final models (Figs 8, 18, 24, 30)
+REPORT_FIGURES = [*range(2, 19), *range(20, 31)]
+PER_STEP_MERGED = all("update_mode" in inspect.signature(algo.__init__).parameters for algo in (REINFORCE, NStepSARSA))
+
+
+def test_every_figure_of_the_report_has_a_study_file() -> None:
+    figures = sorted(int(path.name[3:5]) for path in SEED_REPORT_STUDIES.glob("fig*.yml"))
+    assert figures == REPORT_FIGURES
+
+
+@pytest.mark.skipif(not PER_STEP_MERGED, reason="the studies use update_mode='per_step' (the textbook issue's branch)")
+def test_the_report_studies_load() -> None:
+    runs = 0
+    for path in sorted(SEED_REPORT_STUDIES.glob("*.yml")):
+        study = load_study(path)
+        assert len(study.seeds) >= 10, f"{path.name}: at least 10 seeds (twice the report's 5)"
+        final = "final" in path.stem
+        assert study.budget.episodes == (1000 if final else 500), path.name
+        for variant in study.variants:
+            entry = study.zoo_entry(variant)
+            assert entry["update_mode"] == "per_step", path.name
+            assert entry["n_envs"] == 1, path.name
+        assert study.notes, f"{path.name}: say what the report leaves unstated"
+        runs += len(study.runs())
+    assert runs > 500
+
+
+# ---- the command, end to end ---------------------------------------------------------------------------------------
+
+
+def test_a_tiny_study_runs_end_to_end(tmp_path: Path) -> None:
+    study_file = write_study(tmp_path, TINY, "tiny.yml")
+    cache, results = tmp_path / "cache", tmp_path / "results"
+    command = [sys.executable, "-m", "benchmarks.studies", str(study_file), "--workers", "1"]
+    command += ["--cache-dir", str(cache), "--results-dir", str(results)]
+    done = subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "4 runs: 0 cached, 4 to run" in done.stdout
+    for name in ("tiny.png", "tiny.csv", "tiny.md", "tiny.json", "STUDIES.md"):
+        assert (results / name).is_file(), name
+    table = pd.read_csv(results / "tiny.csv")
+    assert table["variant"].tolist() == ["n1", "n3"]
+    assert table["seeds"].tolist() == [2, 2]
+    assert table["episodes"].tolist() == [6, 6]
+    assert (table["mean_return_low"] <= table["mean_return"]).all()
+    record = json.loads((results / "tiny.json").read_text())
+    assert record["runs"] == 4
+    assert record["complete"]
+    (verdict,) = record["claims"]
+    assert verdict["verdict"] in (stats.SUPPORTED, stats.REVERSED, stats.TOO_CLOSE)
+    index = (results / "STUDIES.md").read_text()
+    assert "| n = 3 beats n = 1 |" in index
+    assert verdict["verdict"] in index
+    assert "Compute: 4 runs" in index
+    # Each run's episodes, exactly the budget
+    for run_file in cache.rglob("episodes.csv"):
+        assert len(pd.read_csv(run_file)) == 6
+    # Again: everything cached, nothing run
+    listed = subprocess.run([*command, "--list"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
+    assert "4 runs, 4 cached" in listed.stdout, listed.stdout + listed.stderr
