@@ -151,6 +151,14 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         # π(a|s, θ) = soft-max of the action preferences h(s, a, θ) (S&B eq. 13.2)
         return th.multinomial(th.softmax(logits, dim=-1), 1, replacement=True).squeeze(-1)
 
+    def set_training_mode(self, mode: bool) -> None:
+        """
+        :param mode: train (True) or evaluation (False) mode of every module; nothing to do if already there (the
+            per-step loop switches at every env step, and ``nn.Module.train`` visits every submodule)
+        """
+        if self.training != mode:
+            super().set_training_mode(mode)
+
     @property
     def value_parameters(self) -> list[nn.Parameter]:
         """The parameters ``value_optimizer`` trains (w; none without a baseline)."""

@@ -7,7 +7,7 @@ import torch.nn.functional as F
 from gymnasium import spaces
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor
+from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor, polyak_update
 
 from sb3_classic.common.buffers import TrainingBatch, TrajectorySamples, select
 from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
@@ -51,6 +51,10 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     much as one on a single transition: the per-step mode would take 128× more gradient steps for the same data
     (the benchmarks' learning curves in ``benchmarks/results/learning.md`` are the batch mode's).
 
+    Two options that are not in the book, for neural networks (both off by default, so the book's algorithm is the
+    default): a slowly-moving bootstrap network (``target_update_interval``, ``tau``: SB3's DQN names), and
+    LayerNorm in the Q-network (``policy_kwargs=dict(layer_norm=True)``, as CleanRL's PQN).
+
     The greedy action breaks ties at random (as the book's ``argmax`` does), so that a q̂ initialised to a constant
     does not always pick the first action; ``predict(deterministic=True)`` picks the first of tied actions, so that it
     stays reproducible.
@@ -83,6 +87,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     :param exploration_final_eps: final ε (the floor of the exponential decay)
     :param exploration_fraction: fraction of training over which the linear decay runs
     :param exploration_decay_rate: per-episode factor of the exponential decay
+    :param target_update_interval: bootstrap from a copy of q̂ (``policy.q_net_target``) moved towards q̂ every this
+        many env steps (all envs together), by ``tau``; None bootstraps from q̂ itself, as the book does
+    :param tau: the soft update coefficient of the copy ("Polyak update", between 0 and 1; 1 copies q̂)
     :param loss_function: ``"mse"`` (½(G − q̂)², the book's update) or ``"huber"`` (the same within 1 of the target,
         linear beyond)
     :param max_grad_norm: clip the gradient norm to this; None for no clipping
@@ -128,6 +135,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         exploration_final_eps: float = 0.05,
         exploration_fraction: float = 0.1,
         exploration_decay_rate: float = 0.995,
+        target_update_interval: int | None = None,
+        tau: float = 1.0,
         loss_function: str = "mse",
         max_grad_norm: float | None = None,
         lr_decay_factor: float = 1.0,
@@ -175,6 +184,10 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self.exploration_final_eps = exploration_final_eps
         self.exploration_fraction = exploration_fraction
         self.exploration_decay_rate = exploration_decay_rate
+        self.target_update_interval = target_update_interval
+        self.tau = tau
+        # Env steps at the last move of the bootstrap network towards q̂
+        self._target_updated_at = 0
         self.loss_function = loss_function
         # ε of the ε-greedy behaviour policy (SB3's DQN name); follows exploration_schedule
         self.exploration_rate = exploration_initial_eps
@@ -202,6 +215,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         check_range("exploration_fraction", self.exploration_fraction, 0.0, 1.0, low_open=True)
         check_range("exploration_decay_rate", self.exploration_decay_rate, 0.0, 1.0, low_open=True)
         check_choice("loss_function", self.loss_function, ("mse", "huber"))
+        if self.target_update_interval is not None:
+            check_positive_int("target_update_interval", self.target_update_interval, hint="or None for no target network")
+        check_range("tau", self.tau, 0.0, 1.0, low_open=True, hint="1.0 copies q̂ at every target update")
 
     def _initial_buffer_size(self) -> int:
         # At most n_steps transitions per env wait for their targets between updates
@@ -220,7 +236,10 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self._update_exploration_rate()
 
     def _make_policy(self) -> BasePolicy:
-        return self.policy_class(self.observation_space, self.action_space, self.lr_schedule, **self.policy_kwargs)
+        target_network = self.target_update_interval is not None
+        return self.policy_class(
+            self.observation_space, self.action_space, self.lr_schedule, target_network=target_network, **self.policy_kwargs
+        )
 
     def _update_exploration_rate(self) -> None:
         if isinstance(self.exploration_schedule_fn, ExponentialDecay):
@@ -305,7 +324,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
                 bootstrap[continuing] = self._next_state_values(data, stop_rows[continuing] + 1, envs[continuing])
             if truncated.any():
                 final_obs = select(data.final_observations, (stop_rows[truncated], envs[truncated]))
-                bootstrap[truncated] = self._bootstrap_values(self.policy.q_net(obs_as_tensor(final_obs, self.device)))
+                bootstrap[truncated] = self._bootstrap_values(self.policy.bootstrap_net(obs_as_tensor(final_obs, self.device)))
         targets = windows.reward_sums[rows, envs] + windows.bootstrap_discounts[rows, envs] * bootstrap
         return TrainingBatch(
             observations=obs_as_tensor(select(data.observations, (rows, envs)), self.device),
@@ -326,7 +345,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         last_row = len(data.rewards) - 1
         cached_q, cached_updates, cached_timesteps = self._rollout_q_values
         if (
-            (rows == last_row).all()
+            self.policy.q_net_target is None
+            and (rows == last_row).all()
             and cached_updates == self._n_updates
             and cached_timesteps + self.n_envs == self.num_timesteps
         ):
@@ -335,7 +355,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             q_values = cached_q[envs]
         else:
             observations = obs_as_tensor(select(data.observations, (rows, envs)), self.device)
-            q_values = self.policy.q_net(observations).cpu().numpy()
+            q_values = self.policy.bootstrap_net(observations).cpu().numpy()
         if self.expected_sarsa:
             return epsilon_greedy_expectation(q_values, self.exploration_rate).astype(np.float32)
         return q_values[np.arange(len(rows)), data.actions[rows, envs]].astype(np.float32)
@@ -389,6 +409,11 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
                 q_first += [q_predicted] if gradient_step == 0 else []
 
         self.rollout_buffer.mark_trained(batch.trained)
+        target = self.policy.q_net_target
+        if target is not None and self.num_timesteps - self._target_updated_at >= (self.target_update_interval or 0):
+            # w⁻ ← τ w + (1 − τ) w⁻ (SB3's DQN; not in the book)
+            polyak_update(self.policy.q_net.parameters(), target.parameters(), self.tau)
+            self._target_updated_at = self.num_timesteps
         n_steps = self.gradient_steps * (1 if self.update_mode == "batch" else n_transitions)
         self._n_updates += n_steps
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")

@@ -1,12 +1,19 @@
 """Q-network policies of n-step SARSA: q̂(s, ·, w), one output per action."""
 
+import copy
 from typing import Any
 
 import numpy as np
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, CombinedExtractor, FlattenExtractor, NatureCNN
+from stable_baselines3.common.torch_layers import (
+    BaseFeaturesExtractor,
+    CombinedExtractor,
+    FlattenExtractor,
+    NatureCNN,
+    create_mlp,
+)
 from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from stable_baselines3.dqn.policies import QNetwork
 from torch import nn
@@ -18,7 +25,6 @@ from sb3_classic.common.torch_layers import (
     kaiming_init,
     make_activation,
     optimizer_kwargs_with_defaults,
-    remove_biases,
 )
 
 
@@ -41,6 +47,11 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         and every bias at 0 (the book's linear methods start at 0)
     :param with_bias: whether the linear layers have a bias (SB3's ``create_mlp`` name). The book's linear q̂(s, a, w)
         = wᵀx(s, a) is ``net_arch=[], with_bias=False, weight_init=0.0`` over features x such as ``TileCoding``'s
+    :param layer_norm: LayerNorm after every hidden linear layer, before its activation (as CleanRL's PQN, which
+        learns with on-policy Q-targets from the online network: it keeps the features' scale, and so the targets',
+        from drifting)
+    :param target_network: also build ``q_net_target``, a copy of q̂ that NStepSARSA bootstraps from and moves towards
+        q̂ every ``target_update_interval`` steps (SB3's DQN); the book bootstraps from q̂ itself
     :param features_extractor_class: features extractor to use
     :param features_extractor_kwargs: keyword arguments to pass to the features extractor
     :param normalize_images: whether to divide images by 255
@@ -62,6 +73,8 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         activation_kwargs: dict[str, Any] | None = None,
         weight_init: str | float = "kaiming",
         with_bias: bool = True,
+        layer_norm: bool = False,
+        target_network: bool = False,
         features_extractor_class: type[BaseFeaturesExtractor] = FlattenExtractor,
         features_extractor_kwargs: dict[str, Any] | None = None,
         normalize_images: bool = True,
@@ -85,6 +98,8 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         self.activation_kwargs = activation_kwargs
         self.weight_init = weight_init
         self.with_bias = with_bias
+        self.layer_norm = layer_norm
+        self.target_network = target_network
 
         features_extractor = self.make_features_extractor()
         self.q_net = QNetwork(
@@ -96,8 +111,17 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             activation_fn=make_activation(activation_fn, activation_kwargs),
             normalize_images=normalize_images,
         )
-        if not with_bias:
-            remove_biases(self.q_net.q_net)
+        if layer_norm or not with_bias:
+            # SB3's QNetwork has neither option: the same MLP from SB3's create_mlp, with them
+            mlp = create_mlp(
+                features_extractor.features_dim,
+                int(self.action_space.n),
+                self.net_arch,
+                make_activation(activation_fn, activation_kwargs),
+                with_bias=with_bias,
+                post_linear_modules=[nn.LayerNorm] if layer_norm else None,
+            )
+            self.q_net.q_net = nn.Sequential(*mlp)
         layers = list(self.q_net.q_net)
         hidden, output = [features_extractor, *layers[:-1]], layers[-1]
         if not isinstance(weight_init, str):
@@ -108,8 +132,18 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             for module in hidden:
                 module.apply(lambda layer: self.init_weights(layer, gain=np.sqrt(2)))
             output.apply(lambda layer: self.init_weights(layer, gain=1.0))
+        self.q_net_target: QNetwork | None = None
+        if target_network:
+            self.q_net_target = copy.deepcopy(self.q_net)
+            self.q_net_target.requires_grad_(False)
+            self.q_net_target.set_training_mode(False)
         optimizer_kwargs = optimizer_kwargs_with_defaults(self.optimizer_class, self.optimizer_kwargs)
         self.optimizer = self.optimizer_class(self.q_net.parameters(), lr=lr_schedule(1), **optimizer_kwargs)  # type: ignore[call-arg]
+
+    @property
+    def bootstrap_net(self) -> QNetwork:
+        """The network the n-step targets bootstrap from: ``q_net_target`` if there is one, else q̂ itself."""
+        return self.q_net if self.q_net_target is None else self.q_net_target
 
     def forward(self, obs: PyTorchObs, deterministic: bool = True) -> th.Tensor:
         """:return: the greedy actions argmax_a q̂(obs, a)"""
@@ -126,6 +160,8 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             activation_kwargs=self.activation_kwargs,
             weight_init=self.weight_init,
             with_bias=self.with_bias,
+            layer_norm=self.layer_norm,
+            target_network=self.target_network,
             lr_schedule=self._dummy_schedule,  # not needed to load the policy alone
             optimizer_class=self.optimizer_class,
             optimizer_kwargs=self.optimizer_kwargs,
@@ -135,6 +171,12 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         return data
 
     def set_training_mode(self, mode: bool) -> None:
+        """
+        :param mode: train (True) or evaluation (False) mode of every module; nothing to do if already there (the
+            per-step loop switches at every env step, and ``nn.Module.train`` visits every submodule)
+        """
+        if self.training == mode and self.q_net.training == mode:
+            return
         self.q_net.set_training_mode(mode)
         self.training = mode
 

@@ -1,0 +1,114 @@
+"""NStepSARSA's options for neural networks that are not in the book: a bootstrap (target) network and LayerNorm."""
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import torch as th
+from stable_baselines3.common.env_util import make_vec_env
+from torch import nn
+
+from sb3_classic import NStepSARSA
+from sb3_classic.common.returns import nstep_targets
+
+
+def make(**kwargs: Any) -> NStepSARSA:
+    env = make_vec_env("CartPole-v1", n_envs=2, seed=0)
+    return NStepSARSA(
+        "MlpPolicy", env, policy_kwargs=dict(net_arch=[16]), n_steps=3, train_freq=8, seed=0, device="cpu", **kwargs
+    )
+
+
+def flat(module: nn.Module) -> th.Tensor:
+    return th.cat([p.detach().flatten() for p in module.parameters()])
+
+
+def test_no_target_network_by_default() -> None:
+    model = make()
+    assert model.policy.q_net_target is None
+    assert model.policy.bootstrap_net is model.policy.q_net
+
+
+def test_target_network_is_a_frozen_copy_outside_the_optimizer() -> None:
+    model = make(target_update_interval=1000)
+    target = model.policy.q_net_target
+    assert target is not None
+    assert th.equal(flat(target), flat(model.policy.q_net))
+    assert not any(p.requires_grad for p in target.parameters())
+    trained = {id(p) for group in model.policy.optimizer.param_groups for p in group["params"]}
+    assert not trained & {id(p) for p in target.parameters()}
+
+
+def test_targets_bootstrap_from_the_target_network() -> None:
+    model = make(target_update_interval=10**9)
+    target = model.policy.q_net_target
+    assert target is not None
+    with th.no_grad():
+        for p in target.parameters():
+            p.zero_()  # q̂⁻ ≡ 0: every bootstrap term vanishes
+    model.learn(16)  # one rollout of 8 steps per env, no target update (the interval is never reached)
+    model.collect_rollouts(model.env, model._init_callback(None), model.rollout_buffer)  # type: ignore[arg-type]
+    batch = model._training_batch()
+    assert batch is not None
+    data = model.rollout_buffer.get()
+    expected, _ = nstep_targets(data.rewards, data.dones, np.zeros_like(data.rewards), model.gamma, model.n_steps)
+    np.testing.assert_allclose(batch.targets.numpy(), expected[batch.trained], rtol=1e-6)
+    # ... which the online network would not give
+    assert th.equal(flat(target), th.zeros_like(flat(target)))
+    assert flat(model.policy.q_net).abs().sum() > 0
+
+
+@pytest.mark.parametrize("tau", [1.0, 0.5])
+def test_target_network_moves_towards_q_every_interval(tau: float) -> None:
+    model = make(target_update_interval=32, tau=tau)
+    target = model.policy.q_net_target
+    assert target is not None
+    updates: list[tuple[int, th.Tensor, th.Tensor]] = []
+    train = model.train
+
+    def recorded_train() -> None:
+        before = flat(target)
+        train()
+        updates.append((model.num_timesteps, before, flat(target)))
+
+    model.train = recorded_train  # type: ignore[method-assign]
+    model.learn(160)
+    moved = [(steps, before, after) for steps, before, after in updates if not th.equal(before, after)]
+    # 16 env steps per update (8 per env, 2 envs): the target moves every second update
+    assert [steps for steps, _, _ in moved] == [32, 64, 96, 128, 160]
+    _, before, after = moved[-1]
+    # w⁻ ← τ w + (1 − τ) w⁻, with w the weights after the update
+    np.testing.assert_allclose(
+        after.numpy(), (tau * flat(model.policy.q_net) + (1 - tau) * before).numpy(), rtol=1e-5, atol=1e-7
+    )
+
+
+def test_target_network_is_saved_and_loaded(tmp_path: Path) -> None:
+    model = make(target_update_interval=64, tau=0.1).learn(300)
+    model.save(tmp_path / "model")
+    loaded = NStepSARSA.load(tmp_path / "model", device="cpu")
+    assert loaded.policy.q_net_target is not None
+    assert model.policy.q_net_target is not None
+    assert th.equal(flat(loaded.policy.q_net_target), flat(model.policy.q_net_target))
+    assert loaded.target_update_interval == 64
+    assert loaded._target_updated_at == model._target_updated_at
+
+
+@pytest.mark.parametrize(("name", "value"), [("target_update_interval", 0), ("tau", 0.0), ("tau", 1.5)])
+def test_bad_target_arguments(name: str, value: float) -> None:
+    with pytest.raises(ValueError, match=name):
+        make(**{name: value})
+
+
+@pytest.mark.parametrize("with_bias", [True, False])
+def test_layer_norm_after_every_hidden_layer(with_bias: bool) -> None:
+    model = NStepSARSA(
+        "MlpPolicy", "CartPole-v1", policy_kwargs=dict(net_arch=[32, 16], layer_norm=True, with_bias=with_bias), device="cpu"
+    )
+    layers = list(model.policy.q_net.q_net)
+    kinds = [type(layer) for layer in layers]
+    assert kinds == [nn.Linear, nn.LayerNorm, nn.ReLU, nn.Linear, nn.LayerNorm, nn.ReLU, nn.Linear]
+    assert [layer.normalized_shape for layer in layers if isinstance(layer, nn.LayerNorm)] == [(32,), (16,)]
+    assert all((layer.bias is not None) == with_bias for layer in layers if isinstance(layer, nn.Linear))
+    model.learn(200)
