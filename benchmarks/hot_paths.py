@@ -23,7 +23,6 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import torch as th
-import torch.nn.functional as F
 from rich.console import Console
 from stable_baselines3.common.base_class import BaseAlgorithm
 from torch.utils.benchmark import Timer
@@ -71,17 +70,12 @@ def sarsa_gradient_step(env_id: str, optimizer_kwargs: dict[str, Any]) -> Callab
     """
     policy_kwargs = dict(net_arch=NET_ARCH, optimizer_kwargs=optimizer_kwargs)
     model = NStepSARSA("MlpPolicy", env_id, policy_kwargs=policy_kwargs, seed=0, device="cpu")
-    q_net, optimizer = model.policy.q_net, model.policy.optimizer
     observations = observation_batch(model, BATCH_SIZE)
     actions = th.randint(int(model.action_space.n), (BATCH_SIZE, 1))
     targets = th.randn(BATCH_SIZE)
 
     def step() -> None:
-        q_predicted = q_net(observations).gather(1, actions).flatten()
-        loss = 0.5 * F.mse_loss(q_predicted, targets)
-        optimizer.zero_grad()
-        loss.backward()
-        optimizer.step()
+        model._gradient_step(observations, actions, targets)
 
     return step
 
