@@ -27,10 +27,11 @@ from rich.console import Console
 from stable_baselines3.common.base_class import BaseAlgorithm
 from torch.utils.benchmark import Timer
 
-from benchmarks.common import DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR, code_versions
+from benchmarks.common import DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR
 from benchmarks.report import markdown_table
 from benchmarks.throughput import NET_ARCH
 from sb3_classic import REINFORCE, NStepSARSA
+from sb3_classic.harness.common import code_versions
 
 #: The Adam implementations compared, as the ``optimizer_kwargs`` that choose them (sb3_classic's default: none)
 ADAM_VARIANTS = {

@@ -9,8 +9,8 @@ import pandas as pd
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from benchmarks.common import LABELS, THRESHOLDS, RunSpec
-from benchmarks.runner import EPISODES_FILE, EVALUATIONS_FILE, RUN_FILE, load_run
+from sb3_classic.harness.common import LABELS, THRESHOLDS, RunSpec
+from sb3_classic.harness.runner import EPISODES_FILE, EVALUATIONS_FILE, RUN_FILE, load_run
 
 RUN_COLUMNS = ["algo", "env_id", "seed"]
 #: What the tables use of each run's ``run.json``

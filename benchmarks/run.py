@@ -8,52 +8,30 @@ and plots of benchmarks/results/; then the throughput of learn() against A2C's.
     python -m benchmarks.run --scheduler tcp://HOST:8786   # the runs on a Dask cluster (benchmarks/README.md)
 
 Finished runs are cached in benchmarks/cache/ and never run again: an interrupted benchmark resumes where it stopped.
+The runs are the harness's (``sb3_classic.harness``: a run built by rl-zoo3's ExperimentManager, its cache, the
+process pool or the Dask cluster, the progress display); this module is the benchmark's settings, report and command.
 """
 
 import argparse
-import multiprocessing
 import os
 import platform
-import queue
 import shlex
 import sys
 import time
-from collections.abc import Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from contextlib import AbstractContextManager, contextmanager
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
 
 import yaml
 from rich.console import Console
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TaskID, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from benchmarks.common import (
-    ALL_ALGOS,
-    DEFAULT_CACHE_DIR,
-    DEFAULT_RESULTS_DIR,
-    ENV_IDS,
-    LABELS,
-    OUR_ALGOS,
-    QUICK_RESULTS_DIR,
-    RunSpec,
-    code_versions,
-    hyperparams_path,
-)
+from benchmarks.common import DEFAULT_CACHE_DIR, DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR
 from benchmarks.report import load_results, markdown_table, summary_table, threshold_crossings, write_learning_report
-from benchmarks.runner import (
-    RUN_FILE,
-    ClusterError,
-    RunError,
-    RunResult,
-    init_worker,
-    run_in_worker,
-    store_failure,
-    store_run,
-)
 from benchmarks.throughput import ThroughputSettings, run_throughput, throughput_header, write_throughput_report
+from sb3_classic.harness.common import ALL_ALGOS, LABELS, OUR_ALGOS, RunSpec, code_versions, hyperparams_path
+from sb3_classic.harness.pool import report_missing, run_pending
+from sb3_classic.harness.runner import RUN_FILE, ClusterError
 
 
 @dataclass
@@ -121,165 +99,6 @@ def make_specs(settings: Settings, env_ids: Sequence[str], algos: Sequence[str])
                     budget = settings.budgets[env_id]
                     specs.append(RunSpec.create(algo, env_id, seed, budget, settings.eval_freq, settings.eval_episodes))
     return specs
-
-
-class ProgressSource(Protocol):
-    """A ``multiprocessing.Queue`` or a ``queue.Queue``."""
-
-    def get_nowait(self) -> tuple[str, int]:
-        """:return: the next report; :raise queue.Empty: if there is none"""
-
-
-class Runs(Protocol):
-    """Where the runs train: the local process pool (``PoolRuns``) or a Dask cluster (``benchmarks.cluster.DaskRuns``)."""
-
-    @property
-    def progress(self) -> ProgressSource:
-        """The runs' progress reports, ``(run name, env steps)``."""
-
-    def submit(self, spec: RunSpec) -> "Future[RunResult]":
-        """:return: the future of ``spec``'s ``RunResult``"""
-
-    def cancel(self) -> None:
-        """Cancel the runs not started."""
-
-
-class PoolRuns:
-    """
-    Runs in a local pool of processes (spawned: each run gets a fresh interpreter).
-
-    :param pool: the pool, whose processes report progress to ``progress`` (``init_worker``)
-    :param progress: their queue
-    """
-
-    def __init__(self, pool: ProcessPoolExecutor, progress: ProgressSource):
-        self.pool = pool
-        self.progress = progress
-
-    def submit(self, spec: RunSpec) -> "Future[RunResult]":
-        """:return: the future of ``spec``'s ``RunResult``"""
-        return self.pool.submit(run_in_worker, spec)
-
-    def cancel(self) -> None:
-        """Cancel the runs not started."""
-        self.pool.shutdown(wait=False, cancel_futures=True)
-
-
-@contextmanager
-def local_runs(workers: int) -> Iterator[PoolRuns]:
-    """:param workers: the number of processes"""
-    context = multiprocessing.get_context("spawn")
-    progress_queue = context.Queue()
-    with ProcessPoolExecutor(workers, mp_context=context, initializer=init_worker, initargs=(progress_queue,)) as pool:
-        yield PoolRuns(pool, progress_queue)
-
-
-def open_runs(workers: int, scheduler: str | None, console: Console) -> AbstractContextManager[Runs]:
-    """
-    :param workers: the processes of the local pool
-    :param scheduler: a Dask scheduler's address (``tcp://HOST:PORT``), or None for the local pool
-    :param console: where to say what the cluster is
-    :return: where the runs train, as a context
-    :raise ClusterError: if Dask is not installed, or the cluster cannot run the benchmark
-    """
-    if scheduler is None:
-        return local_runs(workers)
-    try:
-        # Dask is optional, and imported only here
-        from benchmarks import cluster
-    except ModuleNotFoundError as error:
-        if error.name not in ("dask", "distributed"):
-            raise
-        raise ClusterError(
-            f"--scheduler {scheduler}: Dask is not installed ({error}): pip install -e '.[benchmarks,dask]'"
-        ) from error
-    return cluster.connect(scheduler, console)
-
-
-def run_pending(
-    specs: Sequence[RunSpec], workers: int, cache_dir: Path, console: Console, scheduler: str | None = None
-) -> list[RunSpec]:
-    """
-    Run ``specs`` in a pool of ``workers`` processes, or on the Dask cluster of ``scheduler``, showing the progress of
-    each and of all. Every run comes back as a ``RunResult``, which this process writes into the cache.
-
-    :param specs: the runs
-    :param workers: the processes of the local pool (without ``scheduler``)
-    :param cache_dir: the cache root
-    :param console: where to show the progress
-    :param scheduler: a Dask scheduler's address (``tcp://HOST:PORT``), or None for the local pool
-    :return: the runs that failed (their errors are printed, and they are not cached)
-    :raise ClusterError: if the cluster of ``scheduler`` cannot run the benchmark (nothing was run)
-    """
-    if not specs:
-        return []
-    failed = []
-    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
-    with open_runs(workers, scheduler, console) as runs, Progress(*columns, console=console) as progress:
-        overall = progress.add_task(f"{len(specs)} runs (env steps)", total=sum(spec.n_timesteps for spec in specs))
-        futures: dict[Future[RunResult], RunSpec] = {runs.submit(spec): spec for spec in specs}
-        by_name = {spec.name: spec for spec in specs}
-        tasks: dict[str, TaskID] = {}
-        steps = dict.fromkeys(by_name, 0)
-        finished: set[str] = set()
-
-        def show(name: str, num_timesteps: int) -> None:
-            # A run started again (its Dask worker died) goes back: the overall bar with it
-            completed = min(num_timesteps, by_name[name].n_timesteps)
-            progress.advance(overall, completed - steps[name])
-            steps[name] = completed
-            if name in finished:
-                progress.remove_task(tasks.pop(name))
-            elif name not in tasks:
-                tasks[name] = progress.add_task(name, total=by_name[name].n_timesteps, completed=completed)
-            else:
-                progress.update(tasks[name], completed=completed)
-
-        pending = set(futures)
-        try:
-            while pending:
-                done, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
-                while True:
-                    try:
-                        name, num_timesteps = runs.progress.get_nowait()
-                    except queue.Empty:
-                        break
-                    if name in by_name and name not in finished:
-                        show(name, num_timesteps)
-                for future in done:
-                    spec = futures[future]
-                    finished.add(spec.name)
-                    if spec.name in tasks:
-                        show(spec.name, spec.n_timesteps)
-                    else:
-                        progress.advance(overall, spec.n_timesteps - steps[spec.name])
-                    message = _store(spec, future, cache_dir)
-                    if message is None:
-                        progress.console.print(f"done: {spec.name}")
-                    else:
-                        failed.append(spec)
-                        progress.console.print(f"[red]failed: {spec.name}: {message}[/red]", markup=True, highlight=False)
-        except KeyboardInterrupt:
-            runs.cancel()
-            raise
-    return failed
-
-
-def _store(spec: RunSpec, future: "Future[RunResult]", cache_dir: Path) -> str | None:
-    """
-    Write the finished run of ``future`` into the cache.
-
-    :return: None, or why the run failed (its error; where its log was kept)
-    """
-    try:
-        store_run(spec, cache_dir, future.result())
-    except RunError as error:
-        return f"{escape(str(error))} (its log: {escape(str(store_failure(spec, cache_dir, error.log)))})"
-    except Exception as error:
-        # Raised in the worker, or by Dask (KilledWorker: its workers died; CancelledError: the cluster went away),
-        # or by store_run (other versions)
-        return escape(f"{type(error).__name__}: {error}")
-    return None
 
 
 def learning_header(
@@ -430,21 +249,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             markup=False,
         )
     return report_missing(results.missing, console)
-
-
-def report_missing(missing: Sequence[RunSpec], console: Console) -> int:
-    """
-    Whatever happened to them (errors, dead workers), the runs not in the cache are named, never left out quietly.
-
-    :param missing: the runs of the benchmark not in the cache
-    :param console: where to name them
-    :return: the command's exit status: 1 if any is missing
-    """
-    if not missing:
-        return 0
-    names = ", ".join(spec.name for spec in missing)
-    console.print(f"[red]{len(missing)} runs failed, not in the cache: {escape(names)}[/red]", highlight=False, soft_wrap=True)
-    return 1
 
 
 if __name__ == "__main__":

@@ -27,17 +27,9 @@ from rl_zoo3.exp_manager import ExperimentManager
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 
-from benchmarks.common import (
-    DEFAULT_RESULTS_DIR,
-    ENV_IDS,
-    LABELS,
-    QUICK_RESULTS_DIR,
-    code_versions,
-    hyperparams_path,
-    load_hyperparams,
-    register_algorithms,
-)
+from benchmarks.common import DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR
 from benchmarks.report import markdown_table
+from sb3_classic.harness.common import LABELS, code_versions, hyperparams_path, load_hyperparams, register_algorithms
 
 THROUGHPUT_ALGOS = ("a2c", "reinforce", "nstep_sarsa")
 BASELINE = "a2c"

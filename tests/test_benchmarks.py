@@ -10,13 +10,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from benchmarks import hot_paths, runner
-from benchmarks.common import REPO_ROOT, RunSpec, code_versions, register_algorithms
+from benchmarks import hot_paths
+from benchmarks.common import REPO_ROOT
 from benchmarks.report import Results, episode_curves, episodes_by, first_crossing, summary_table, threshold_crossings
 from benchmarks.run import FULL, QUICK, make_specs, parse_budgets
-from benchmarks.runner import RUN_FILE, episodes_from_monitors, run_one
 from benchmarks.throughput import measure, throughput_ratios, throughput_table, time_breakdown_table
 from sb3_classic import NStepSARSA
+from sb3_classic.harness import runner
+from sb3_classic.harness.common import RunSpec, code_versions, register_algorithms
+from sb3_classic.harness.runner import RUN_FILE, episodes_from_monitors, run_one
 
 SPEC = RunSpec(
     algo="reinforce",

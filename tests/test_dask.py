@@ -20,8 +20,19 @@ import pandas as pd
 import pytest
 
 from benchmarks import run
-from benchmarks.common import REPO_ROOT, RunSpec, code_versions
-from benchmarks.runner import EPISODES_FILE, EVALUATIONS_FILE, RUN_FILE, RunResult, execute_run, load_run, run_one, store_run
+from benchmarks.common import REPO_ROOT
+from sb3_classic.harness import pool
+from sb3_classic.harness.common import RunSpec, code_versions
+from sb3_classic.harness.runner import (
+    EPISODES_FILE,
+    EVALUATIONS_FILE,
+    RUN_FILE,
+    RunResult,
+    execute_run,
+    load_run,
+    run_one,
+    store_run,
+)
 
 #: The options of a small benchmark of our two algorithms on CartPole-v1 (seed 0 unless --seeds says more)
 SMALL = ("--envs", "CartPole-v1", "--seeds", "1", "--peer-seeds", "0", "--eval-episodes", "2", "--skip-throughput")
@@ -53,8 +64,8 @@ def dask_cluster(folder: Path, n_workers: int = 2) -> Iterator[Cluster]:
     """
     Start ``dask scheduler`` and ``n_workers`` ``dask worker --nthreads 1`` on 127.0.0.1, stopped at the end.
 
-    The workers run in ``folder``, away from the repository and the client's cache, with the repository on their
-    path (as a worker started at a checkout's root with ``python -m dask worker``).
+    The workers run in ``folder``, away from the repository and the client's cache, with this checkout first on
+    their path: they import the package under test (the harness is ``sb3_classic.harness``), whatever else is installed.
 
     :param folder: where the processes run and write their logs
     :param n_workers: the workers (named ``worker-0``, …)
@@ -119,7 +130,7 @@ def assert_same_results(spec: RunSpec, cache_dir: Path, reference_dir: Path) -> 
 
 def progress_events(cluster: Cluster) -> list[tuple[str, int, str]]:
     """:return: the progress the workers reported, ``(run name, env steps, worker address)``"""
-    from benchmarks.cluster import PROGRESS_TOPIC
+    from sb3_classic.harness.cluster import PROGRESS_TOPIC
 
     return [tuple(message) for _, message in cluster.client.get_events(PROGRESS_TOPIC)]
 
@@ -219,7 +230,8 @@ import sys
 from benchmarks.run import main
 status = main({options!r})
 print("status", status)
-dask = [name for name in sys.modules if name.split(".")[0] in ("dask", "distributed") or name == "benchmarks.cluster"]
+cluster = ("benchmarks.cluster", "sb3_classic.harness.cluster")
+dask = [name for name in sys.modules if name.split(".")[0] in ("dask", "distributed") or name in cluster]
 print("imported", sorted(dask))
 """
     completed = subprocess.run([sys.executable, "-c", code], cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
@@ -253,7 +265,7 @@ def test_a_result_of_other_versions_is_refused(tiny_result: tuple[RunSpec, RunRe
 
 
 def test_workers_with_other_versions_are_refused_before_any_run() -> None:
-    cluster = pytest.importorskip("benchmarks.cluster")
+    cluster = pytest.importorskip("sb3_classic.harness.cluster")
     expected = cluster.worker_versions()
 
     class FakeClient:
@@ -263,7 +275,7 @@ def test_workers_with_other_versions_are_refused_before_any_run() -> None:
             return {
                 "tcp://10.0.0.1:4000": dict(expected),
                 "tcp://10.0.0.2:4000": {**expected, "torch": "1.0"},
-                "tcp://10.0.0.3:4000": ModuleNotFoundError("No module named 'benchmarks'"),
+                "tcp://10.0.0.3:4000": ModuleNotFoundError("No module named 'sb3_classic'"),
             }
 
     with pytest.raises(cluster.ClusterError) as error:
@@ -273,7 +285,7 @@ def test_workers_with_other_versions_are_refused_before_any_run() -> None:
     assert "tcp://10.0.0.1:4000" not in message
     assert f"worker tcp://10.0.0.2:4000: torch: {expected['torch']} on the client, 1.0 on the worker" in message
     assert "worker tcp://10.0.0.3:4000 cannot run the harness" in message
-    assert "No module named 'benchmarks'" in message
+    assert "No module named 'sb3_classic'" in message
 
     class SameClient:
         def run(self, function: Any, on_error: str) -> dict[str, object]:
@@ -304,7 +316,7 @@ def test_a_run_lost_with_its_workers_is_reported_not_missing(
         def cancel(self) -> None:
             pass
 
-    monkeypatch.setattr(run, "open_runs", lambda *args: nullcontext(LostRuns(lose_all=False)))
+    monkeypatch.setattr(pool, "open_runs", lambda *args: nullcontext(LostRuns(lose_all=False)))
     options = [*SMALL, "--algos", "reinforce", "--seeds", "2", "--budget", "300", "--eval-freq", "100"]
     status = run.main([*options, "--cache-dir", str(tmp_path / "cache"), "--results-dir", str(tmp_path / "results")])
     output = capsys.readouterr().out
@@ -314,7 +326,7 @@ def test_a_run_lost_with_its_workers_is_reported_not_missing(
     assert (spec.run_dir(tmp_path / "cache") / RUN_FILE).exists()
 
     # With no run cached at all: no report to draw, the same list and status
-    monkeypatch.setattr(run, "open_runs", lambda *args: nullcontext(LostRuns(lose_all=True)))
+    monkeypatch.setattr(pool, "open_runs", lambda *args: nullcontext(LostRuns(lose_all=True)))
     status = run.main([*options, "--cache-dir", str(tmp_path / "empty"), "--results-dir", str(tmp_path / "results-empty")])
     output = capsys.readouterr().out
     assert status == 1

@@ -13,11 +13,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from benchmarks.common import REPO_ROOT, RunSpec, code_versions
-from benchmarks.runner import execute_run
-from benchmarks.studies import SEED_REPORT_STUDIES, stats
-from benchmarks.studies.spec import STATED, Claim, StudyError, load_study, policy_kwargs_string
+from benchmarks.common import REPO_ROOT
+from benchmarks.studies import SEED_REPORT_STUDIES
 from sb3_classic import REINFORCE, NStepSARSA
+from sb3_classic.harness.common import RunSpec, code_versions
+from sb3_classic.harness.runner import execute_run
+from sb3_classic.studies import stats
+from sb3_classic.studies.spec import STATED, Claim, StudyError, load_study, policy_kwargs_string
 
 TINY = """
 title: Tiny

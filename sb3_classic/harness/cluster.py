@@ -1,10 +1,13 @@
 """
-The runs of a benchmark on a Dask cluster: ``python -m benchmarks.run --scheduler tcp://HOST:PORT``.
+The runs on a Dask cluster: ``--scheduler tcp://HOST:PORT`` of ``python -m sb3_classic.studies`` (and of the
+repository's ``python -m benchmarks.run``).
 
 Imported only with ``--scheduler`` (Dask is the optional ``dask`` extra). Each run trains on a worker in a
 temporary folder and comes back to the client as the contents of its files (``RunResult``); the client writes the
-cache, so the workers need no shared filesystem. Workers must run the client's versions of the libraries, of
-``sb3_classic`` and of this harness: they are checked before anything is submitted, and again by each run.
+cache, so the workers need no shared filesystem, and no checkout of the repository: a run is a ``RunSpec`` (its
+hyperparameters travel in it) trained by this package's ``runner``. Workers must run the client's versions of the
+libraries, of ``sb3_classic``'s algorithms and of this harness (``sb3_classic/harness/``): they are checked before
+anything is submitted, and again by each run.
 """
 
 import hashlib
@@ -18,18 +21,23 @@ from pathlib import Path
 from distributed import Client, get_worker
 from rich.console import Console
 
-from benchmarks.common import RunSpec, code_versions
-from benchmarks.runner import ClusterError, RunResult, execute_run
+from sb3_classic.harness.common import RunSpec, code_versions
+from sb3_classic.harness.runner import ClusterError, RunResult, execute_run
 
 #: The topic of the workers' progress events (``[run name, env steps, worker address]``), which the client subscribes to
 PROGRESS_TOPIC = "sb3-classic-benchmark-progress"
 #: Seconds to wait for the scheduler to answer
 CONNECT_TIMEOUT_S = 20
-_VERSIONS_FIX = "install the client's versions there (the same commit of this repository) and restart the worker"
+_VERSIONS_FIX = "install the client's versions there (the same release or commit of sb3_classic) and restart the worker"
+#: What a worker needs (the client too, with the dask extra)
+_WORKER_INSTALL = "pip install 'sb3_classic[zoo,dask]' (the client's version; from a checkout: pip install -e '.[zoo,dask]')"
 
 
 def harness_digest() -> str:
-    """:return: a digest of the harness's sources (``benchmarks/*.py``): how a run is built, evaluated and recorded"""
+    """
+    :return: a digest of the harness's sources (``sb3_classic/harness/*.py``): how a run is built, evaluated and
+        recorded. The study runner (``sb3_classic/studies``) runs on the client only, and is not part of it.
+    """
     folder = Path(__file__).resolve().parent
     digest = hashlib.sha256()
     for source in sorted(folder.glob("*.py")):
@@ -43,7 +51,7 @@ def worker_versions() -> dict[str, str]:
     :return: what a run's result depends on besides its settings, in this process: the libraries and
         ``sb3_classic`` (``code_versions``) and the harness (``harness_digest``)
     """
-    return {**code_versions("reinforce"), "benchmarks harness": harness_digest()}
+    return {**code_versions("reinforce"), "sb3_classic harness": harness_digest()}
 
 
 def version_differences(expected: dict[str, str], found: dict[str, str]) -> list[str]:
@@ -134,7 +142,10 @@ def connect(address: str, console: Console) -> Iterator[DaskRuns]:
     try:
         if not client.nthreads():
             command = f"python -m dask worker {address} --nthreads 1"
-            console.print(f"Waiting for a worker: start some at the root of a checkout with `{command}`", highlight=False)
+            console.print(
+                f"Waiting for a worker: start some with `{command}` where sb3_classic is installed ({_WORKER_INSTALL})",
+                highlight=False,
+            )
             client.wait_for_workers(1)
         expected = worker_versions()
         check_workers(client, expected, address)
@@ -156,10 +167,7 @@ def check_workers(client: Client, expected: dict[str, str], address: str) -> Non
     problems = []
     for worker, reply in sorted(replies.items()):
         if isinstance(reply, BaseException):
-            problems.append(
-                f"worker {worker} cannot run the harness ({reply!r}): start it in a checkout of this repository "
-                "(`python -m dask worker ...` from its root) with the package installed: pip install -e '.[benchmarks,dask]'"
-            )
+            problems.append(f"worker {worker} cannot run the harness ({reply!r}): install it there: {_WORKER_INSTALL}")
         elif differences := version_differences(expected, reply):
             problems.append(f"worker {worker}: {'; '.join(differences)}")
     if problems:

@@ -1,7 +1,9 @@
-"""What the benchmarks run: the envs, the algorithms and their hyperparameters, and the cache key of a run."""
+"""
+What a run of the harness is: the algorithms and their hyperparameters (this package's YAMLs for ours, rl-zoo3's for
+the others), the versions a result depends on, and the cache key of a run.
+"""
 
 import hashlib
-import importlib
 import json
 from dataclasses import dataclass
 from functools import cache
@@ -16,8 +18,8 @@ import torch as th
 import yaml
 
 import sb3_classic
+from sb3_classic import zoo
 
-ENV_IDS = ("CartPole-v1", "Acrobot-v1")
 #: The reward threshold an evaluation's mean return must reach (Gymnasium's ``reward_threshold`` for CartPole-v1;
 #: the customary one for Acrobot-v1, whose spec has ``reward_threshold=-100.0``)
 THRESHOLDS = {"CartPole-v1": 475.0, "Acrobot-v1": -100.0}
@@ -26,38 +28,28 @@ PEER_ALGOS = ("a2c", "ppo", "dqn")
 ALL_ALGOS = OUR_ALGOS + PEER_ALGOS
 LABELS = {"reinforce": "REINFORCE", "nstep_sarsa": "NStepSARSA", "a2c": "A2C", "ppo": "PPO", "dqn": "DQN"}
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-#: The package's hyperparameters (rl-zoo3 format), at the repository root
-OUR_HYPERPARAMS_DIR = REPO_ROOT / "hyperparams"
 #: rl-zoo3's tuned hyperparameters, inside the installed package
 ZOO_HYPERPARAMS_DIR = Path(rl_zoo3.__file__).resolve().parent / "hyperparams"
-DEFAULT_CACHE_DIR = REPO_ROOT / "benchmarks" / "cache"
-DEFAULT_RESULTS_DIR = REPO_ROOT / "benchmarks" / "results"
-#: Where ``--quick`` writes its tables and plots: scratch, git-ignored with the cache
-QUICK_RESULTS_DIR = DEFAULT_CACHE_DIR / "quick-results"
+#: Sub-packages of sb3_classic that are not the algorithms: left out of ``code_versions``'s digest (a run's cache key
+#: names the algorithms' code; the Dask workers' check covers the harness, ``cluster.harness_digest``)
+HARNESS_PACKAGES = ("harness", "studies")
 
 
 def register_algorithms() -> None:
     """Put ``reinforce`` and ``nstep_sarsa`` into ``rl_zoo3.ALGOS``, so that the zoo's ExperimentManager builds them."""
-    try:
-        zoo = importlib.import_module("sb3_classic.zoo")
-    except ModuleNotFoundError as error:
-        if error.name != "sb3_classic.zoo":
-            raise
-        # Until sb3_classic.zoo.register() lands, the two entries it adds:
-        rl_zoo3.ALGOS["reinforce"] = sb3_classic.REINFORCE
-        rl_zoo3.ALGOS["nstep_sarsa"] = sb3_classic.NStepSARSA
-    else:
-        zoo.register()
+    zoo.register()
 
 
 def hyperparams_path(algo: str) -> Path:
-    """:return: the YAML the benchmark reads ``algo``'s hyperparameters from"""
+    """
+    :return: the YAML ``RunSpec.create`` reads ``algo``'s hyperparameters from: this package's (shipped inside it,
+        ``sb3_classic.zoo.hyperparams_path``) for ours, rl-zoo3's tuned ones for A2C, PPO and DQN
+    """
     if algo in OUR_ALGOS:
-        return OUR_HYPERPARAMS_DIR / f"{algo}.yml"
+        return zoo.hyperparams_path(algo)
     if algo in PEER_ALGOS:
         return ZOO_HYPERPARAMS_DIR / f"{algo}.yml"
-    raise ValueError(f"algo={algo!r} is not benchmarked: choose one of {ALL_ALGOS}")
+    raise ValueError(f"algo={algo!r} has no hyperparameter file here: choose one of {ALL_ALGOS}")
 
 
 def load_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
@@ -82,7 +74,9 @@ def load_hyperparams(algo: str, env_id: str) -> dict[str, Any]:
 def code_versions(algo: str) -> dict[str, str]:
     """
     The versions of everything a run's result depends on besides its settings: the libraries, and for our
-    algorithms a digest of the package's sources (they change between releases while being tuned).
+    algorithms a digest of the package's sources (they change between releases while being tuned), without the
+    harness's and the study runner's (``HARNESS_PACKAGES``: editing them changes no result, as when they were in the
+    repository's ``benchmarks/``).
 
     :param algo: the algorithm
     :return: name → version
@@ -97,7 +91,8 @@ def code_versions(algo: str) -> dict[str, str]:
     if algo in OUR_ALGOS:
         package = Path(sb3_classic.__file__).resolve().parent
         digest = hashlib.sha256()
-        for source in sorted(package.rglob("*.py")):
+        sources = (path for path in package.rglob("*.py") if path.relative_to(package).parts[0] not in HARNESS_PACKAGES)
+        for source in sorted(sources):
             digest.update(source.relative_to(package).as_posix().encode())
             digest.update(source.read_bytes())
         versions["sb3_classic"] = f"{sb3_classic.__version__}+{digest.hexdigest()[:12]}"

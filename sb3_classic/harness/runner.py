@@ -24,7 +24,7 @@ from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import sync_envs_normalization
 
-from benchmarks.common import RunSpec, code_versions, register_algorithms
+from sb3_classic.harness.common import RunSpec, code_versions, register_algorithms
 
 #: Files of a finished run (the run directory appears, complete, only when the run has finished)
 RUN_FILE = "run.json"
@@ -173,7 +173,7 @@ class RunError(RuntimeError):
 
 
 class ClusterError(RuntimeError):
-    """The Dask cluster of ``--scheduler`` cannot run the benchmark: unreachable, or workers with other versions."""
+    """The Dask cluster of ``--scheduler`` cannot run the runs: unreachable, or workers with other versions."""
 
 
 def run_one(spec: RunSpec, cache_dir: Path, queue: ProgressQueue | None = None) -> dict[str, Any]:

@@ -1,8 +1,8 @@
-"""``python -m benchmarks.studies``: see ``benchmarks.studies.cli``."""
+"""``python -m sb3_classic.studies``: see ``sb3_classic.studies.cli``."""
 
 import sys
 
-from benchmarks.studies.cli import main
+from sb3_classic.studies.cli import main
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -1,15 +1,8 @@
 """
-Run hyperparameter studies: every (variant, seed) of each study file as a cached run of the benchmark harness (built
-by rl-zoo3's ExperimentManager, resumable, in parallel or on a Dask cluster), then per study its figure, table and
-verdicts, and STUDIES.md.
-
-    python -m benchmarks.studies STUDY.yml [STUDY.yml | FOLDER ...]
-    python -m benchmarks.studies benchmarks/studies/seed_report            # the seed report's studies (CPU-days)
-    python -m benchmarks.studies STUDY.yml --seeds 2 --episodes 20         # a reduced run, into scratch
-    python -m benchmarks.studies STUDY.yml --list                          # runs and cached runs, nothing run
-
-Results go to benchmarks/results/studies/ (committed); a reduced run (--seeds, --episodes, --steps) goes to
-benchmarks/cache/quick-studies/, as it is not the study's result.
+The command of the studies, ``python -m sb3_classic.studies STUDY.yml [STUDY.yml | FOLDER ...]``: every (variant,
+seed) of each study file as a cached run of the harness (built by rl-zoo3's ExperimentManager, resumable, in parallel
+or on a Dask cluster), then per study its figure, table and verdicts, and STUDIES.md. ``main`` takes the defaults of
+where it runs: ``INSTALLED`` (folders in the working directory) or the repository's (``benchmarks.studies``).
 """
 
 import argparse
@@ -18,21 +11,56 @@ import shlex
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 from rich.console import Console
 from rich.markup import escape
 
-from benchmarks.common import DEFAULT_CACHE_DIR, DEFAULT_RESULTS_DIR
-from benchmarks.run import report_missing, run_pending
-from benchmarks.runner import RUN_FILE, ClusterError
-from benchmarks.studies import SEED_REPORT_STUDIES
-from benchmarks.studies.outputs import load_study_results, study_command, write_studies_index, write_study
-from benchmarks.studies.spec import StudyError, StudySpec, load_study
+from sb3_classic.harness.pool import report_missing, run_pending
+from sb3_classic.harness.runner import RUN_FILE, ClusterError
+from sb3_classic.studies.outputs import PROGRAM, load_study_results, study_command, write_studies_index, write_study
+from sb3_classic.studies.spec import StudyError, StudySpec, load_study
 
-DEFAULT_STUDY_RESULTS_DIR = DEFAULT_RESULTS_DIR / "studies"
-#: Where reduced runs write their outputs: scratch, git-ignored with the cache
-REDUCED_RESULTS_DIR = DEFAULT_CACHE_DIR / "quick-studies"
+#: Where reduced runs (--seeds, --episodes, --steps) write their outputs, inside the cache: they are not the study's
+REDUCED_RESULTS = "quick-studies"
+
+DESCRIPTION = """\
+Run hyperparameter studies: every (variant, seed) of each study file as a cached run (built by rl-zoo3's
+ExperimentManager, resumable, in parallel or on a Dask cluster), then per study its figure, table and verdicts, and
+STUDIES.md, the index of every claim.
+
+    python -m {program} STUDY.yml [STUDY.yml | FOLDER ...]
+    python -m {program} STUDY.yml --seeds 2 --episodes 20         # a reduced run, into scratch
+    python -m {program} STUDY.yml --list                          # runs and cached runs, nothing run
+    python -m {program} STUDY.yml --scheduler tcp://HOST:8786     # on a Dask cluster (the dask extra)
+
+Finished runs are kept in {cache}/ and never run again: an interrupted study resumes where it stopped. Outputs go
+to {results}/; a reduced run's to {cache}/{reduced}/, as they are not the study's result.
+"""
+
+
+@dataclass(frozen=True)
+class Defaults:
+    """
+    What the command does unless told: where it keeps runs and writes outputs, and the command its outputs show.
+
+    :param program: the module run (``python -m <program>``), as the outputs and ``--help`` show it
+    :param cache_dir: the cache of finished runs (``--cache-dir``); relative: in the working directory
+    :param results_dir: the outputs (``--results-dir``); relative: in the working directory
+    :param root: the folder the outputs' commands show study paths relative to (default: the working directory)
+    :param catalogue: a folder of study files whose claims the index in ``results_dir`` always lists, run or not
+    """
+
+    program: str = PROGRAM
+    cache_dir: Path = Path("sb3_classic-cache")
+    results_dir: Path = Path("studies-results")
+    root: Path | None = None
+    catalogue: Path | None = None
+
+
+#: The installed package's: ``./sb3_classic-cache/`` and ``./studies-results/``
+INSTALLED = Defaults()
 
 
 def study_files(paths: Sequence[Path]) -> list[Path]:
@@ -51,9 +79,20 @@ def study_files(paths: Sequence[Path]) -> list[Path]:
     return files
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """The command line (``python -m benchmarks.studies --help``). :return: the exit status"""
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> int:
+    """
+    The command line (``python -m sb3_classic.studies --help``).
+
+    :param argv: its arguments (default: ``sys.argv[1:]``)
+    :param defaults: where it keeps runs and writes outputs, and the command the outputs show
+    :return: the exit status
+    """
+    description = DESCRIPTION.format(
+        program=defaults.program, cache=defaults.cache_dir, results=defaults.results_dir, reduced=REDUCED_RESULTS
+    )
+    parser = argparse.ArgumentParser(
+        prog=f"python -m {defaults.program}", description=description, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("studies", nargs="+", type=Path, help="study files (YAML), or folders of them")
     parser.add_argument("--seeds", type=int, help="seeds 0 to K − 1 instead of the files' (a reduced run)")
     parser.add_argument("--episodes", type=int, help="episodes per run instead of the files' budget (a reduced run)")
@@ -62,11 +101,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--scheduler", metavar="tcp://HOST:PORT", help="run on the Dask cluster of this scheduler (needs the dask extra)"
     )
-    parser.add_argument("--cache-dir", type=Path, default=DEFAULT_CACHE_DIR, help="where finished runs are kept")
+    cache_help = f"where finished runs are kept (default {defaults.cache_dir})"
+    parser.add_argument("--cache-dir", type=Path, default=defaults.cache_dir, help=cache_help)
     parser.add_argument(
         "--results-dir",
         type=Path,
-        help=f"figures, tables and STUDIES.md (default {DEFAULT_STUDY_RESULTS_DIR}; reduced runs: {REDUCED_RESULTS_DIR})",
+        help=f"figures, tables and STUDIES.md (default {defaults.results_dir}; reduced runs: CACHE_DIR/{REDUCED_RESULTS})",
     )
     parser.add_argument("--list", action="store_true", help="list each study's runs and how many are cached; run nothing")
     parser.add_argument("--report-only", action="store_true", help="run nothing: outputs from the runs already cached")
@@ -89,7 +129,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if duplicates:
         console.print(f"[red]Two study files have the same name: {escape(', '.join(duplicates))}[/red]", highlight=False)
         return 2
-    results_dir = args.results_dir or (REDUCED_RESULTS_DIR if reduced else DEFAULT_STUDY_RESULTS_DIR)
+    results_dir = args.results_dir or (args.cache_dir / REDUCED_RESULTS if reduced else defaults.results_dir)
 
     runs = [run for study in studies for run in study.runs()]
     pending = [run.spec for run in runs if not (run.spec.run_dir(args.cache_dir) / RUN_FILE).exists()]
@@ -125,9 +165,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         missing += [run.spec for run in results.missing]
         extra = [arg for arg in command_args if not _is_study_path(arg, args.studies)]
         command = (
-            study_command(study, extra)
+            study_command(study, extra, defaults.program, defaults.root)
             if len(studies) > 1
-            else shlex.join(["python", "-m", "benchmarks.studies", *command_args])
+            else shlex.join(["python", "-m", defaults.program, *command_args])
         )
         path = write_study(results, results_dir, command, reduced)
         for reading, judged in results.verdicts.items():
@@ -136,13 +176,15 @@ def main(argv: Sequence[str] | None = None) -> int:
                 console.print(f"{study.name}{where}: {result.verdict}: {result.claim.text}", highlight=False, markup=False)
         console.print(f"wrote {path}", highlight=False)
     catalogue = list(studies)
-    if not reduced and results_dir.resolve() == DEFAULT_STUDY_RESULTS_DIR.resolve():
-        # The committed index lists every claim of the seed report, run or not
+    if defaults.catalogue is not None and not reduced and results_dir.resolve() == defaults.results_dir.resolve():
+        # The index of the default results lists every claim of the catalogue (the repository's: the seed report's),
+        # run or not
         shipped = {study.name for study in catalogue}
         catalogue += [
-            study for study in map(load_study, sorted(SEED_REPORT_STUDIES.glob("*.yml"))) if study.name not in shipped
+            study for study in map(load_study, sorted(defaults.catalogue.glob("*.yml"))) if study.name not in shipped
         ]
-    index = write_studies_index(catalogue, results_dir, title="Studies" + (" (reduced runs)" if reduced else ""))
+    title = "Studies" + (" (reduced runs)" if reduced else "")
+    index = write_studies_index(catalogue, results_dir, title, defaults.program, defaults.root)
     console.print(f"wrote {index}", highlight=False)
     return report_missing(missing, console)
 

@@ -20,13 +20,15 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from benchmarks.common import REPO_ROOT, code_versions
-from benchmarks.runner import EPISODES_FILE, RUN_FILE, load_run
-from benchmarks.studies import stats
-from benchmarks.studies.spec import STATED, StudyRun, StudySpec
+from sb3_classic.harness.common import code_versions
+from sb3_classic.harness.runner import EPISODES_FILE, RUN_FILE, load_run
+from sb3_classic.studies import stats
+from sb3_classic.studies.spec import STATED, StudyRun, StudySpec
 
 STUDIES_FILE = "STUDIES.md"
 NOT_RUN = "not yet run"
+#: The module of the command the outputs show (``python -m sb3_classic.studies ...``)
+PROGRAM = "sb3_classic.studies"
 
 
 @dataclass
@@ -86,12 +88,18 @@ def load_study_results(study: StudySpec, cache_dir: Path) -> StudyResults:
     return results
 
 
-def study_command(study: StudySpec, extra: Sequence[str] = ()) -> str:
-    """:return: the command that runs ``study`` (its path relative to the repository, where it is inside)"""
+def study_command(study: StudySpec, extra: Sequence[str] = (), program: str = PROGRAM, root: Path | None = None) -> str:
+    """
+    :param study: the study
+    :param extra: the command's options
+    :param program: the module the command runs (``python -m <program>``)
+    :param root: the folder the command runs in (default: the working directory)
+    :return: the command that runs ``study``: its path relative to ``root`` where it is inside, else as given
+    """
     assert study.path is not None
-    path = study.path.resolve()
-    shown = path.relative_to(REPO_ROOT).as_posix() if path.is_relative_to(REPO_ROOT) else str(study.path)
-    return shlex.join(["python", "-m", "benchmarks.studies", shown, *extra])
+    path, root = study.path.resolve(), (root or Path.cwd()).resolve()
+    shown = path.relative_to(root).as_posix() if path.is_relative_to(root) else str(study.path)
+    return shlex.join(["python", "-m", program, shown, *extra])
 
 
 def summary_frame(results: StudyResults) -> pd.DataFrame:
@@ -274,11 +282,15 @@ the mean over the last 100, and the episodes until the mean of 100 consecutive e
 (475 on CartPole-v1, −100 on Acrobot-v1; a seed that never does counts as the budget)."""
 
 
-def write_studies_index(studies: Sequence[StudySpec], results_dir: Path, title: str = "Studies") -> Path:
+def write_studies_index(
+    studies: Sequence[StudySpec], results_dir: Path, title: str = "Studies", program: str = PROGRAM, root: Path | None = None
+) -> Path:
     """
     ``STUDIES.md``: one row per claim of ``studies`` and of every other study with results in ``results_dir``,
     with its verdict (or "not yet run"), what was measured and the command that re-runs it; and the compute taken.
 
+    :param program: the module of the commands shown (``study_command``)
+    :param root: the folder they run in (``study_command``)
     :return: its path
     """
     records: dict[str, dict[str, Any]] = {}
@@ -291,7 +303,8 @@ def write_studies_index(studies: Sequence[StudySpec], results_dir: Path, title: 
     for study in studies:
         listed.add(study.name)
         record = records.get(study.name)
-        rows += _claim_rows(study.name, study.source, [claim.text for claim in study.claims], record, study_command(study))
+        command = study_command(study, program=program, root=root)
+        rows += _claim_rows(study.name, study.source, [claim.text for claim in study.claims], record, command)
     for name, record in records.items():
         if name not in listed:
             rows += _claim_rows(name, record.get("source", ""), record["claim_texts"], record, record["command"])

@@ -3,7 +3,7 @@ A study file: one env and algorithm, base hyperparameters in the zoo's YAML form
 budget, and the claims under test. ``load_study`` reads and checks one; ``StudySpec.runs`` turns it into the
 harness's runs, one per (variant, reading, seed).
 
-The format (``benchmarks/studies/README.md`` has the long form)::
+The format (the README of the repository's ``benchmarks/studies/`` has the long form)::
 
     study: fig15-sarsa-cartpole-n           # a name (default: the file's stem)
     title: Values of n, n-step SARSA on CartPole-v1
@@ -42,7 +42,7 @@ import gymnasium
 import rl_zoo3
 import yaml
 
-from benchmarks.common import THRESHOLDS, RunSpec, register_algorithms
+from sb3_classic.harness.common import THRESHOLDS, RunSpec, register_algorithms
 
 #: Keys of a zoo YAML entry that the zoo consumes itself (not constructor arguments)
 ZOO_KEYS = frozenset(
@@ -101,7 +101,7 @@ class Budget:
 @dataclass(frozen=True)
 class Claim:
     """
-    One claim under test, decided by bootstrap confidence intervals over seeds (``benchmarks.studies.stats``).
+    One claim under test, decided by bootstrap confidence intervals over seeds (``sb3_classic.studies.stats``).
 
     :param text: the claim in one line, as the source makes it
     :param kind: ``better`` (``variant`` beats each of ``others`` on ``metric``), ``similar`` (the difference from

@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from benchmarks.studies.spec import Claim
+from sb3_classic.studies.spec import Claim
 
 CONFIDENCE = 0.95
 N_RESAMPLES = 10_000
