@@ -14,7 +14,7 @@ import torch as th
 from gymnasium import spaces
 
 from sb3_classic import NStepSARSA, TileCoding
-from sb3_classic.common.tile_coding import HASH_MODULUS, hash_tiles, tile_coordinates, tile_indices
+from sb3_classic.common.tile_coding import HASH_MODULUS, ORIGINS, hash_tiles, tile_coordinates, tile_indices
 
 ROOT = Path(__file__).parents[1]
 
@@ -361,3 +361,17 @@ def test_readme_tile_coding_example_runs() -> None:
     assert isinstance(model, NStepSARSA)
     assert isinstance(model.policy.q_net.features_extractor, TileCoding)
     assert model.policy.q_net.features_extractor.features_dim == 648
+
+
+@pytest.mark.parametrize("origin", ORIGINS)
+def test_cpu_features_equal_the_tile_indices(origin: str) -> None:
+    """``forward`` on the CPU (NumPy) puts its ones exactly at ``active_tiles`` (PyTorch), bounds and outside included."""
+    space = spaces.Box(np.array([-1.2, -0.07, 0.0]), np.array([0.5, 0.07, 3.0]), dtype=np.float32)
+    coder = TileCoding(space, n_tilings=8, tiles_per_dim=(8, 6, 3), origin=origin)
+    rng = np.random.default_rng(0)
+    points = rng.uniform(space.low - 0.2, space.high + 0.2, size=(500, 3))
+    points = np.concatenate([points, space.low[None], space.high[None]]).astype(np.float32)
+    features = coder(th.as_tensor(points))
+    assert features.dtype == th.float32
+    expected = th.zeros_like(features).scatter_(1, coder.active_tiles(th.as_tensor(points)), 1.0)
+    assert th.equal(features, expected)

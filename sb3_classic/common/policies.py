@@ -11,6 +11,14 @@ policies do not (they assume ``start=0``), hence this module.
 import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.policies import BasePolicy
+from torch import nn
+
+#: Modules whose forward pass differs between train and eval mode (``nn.Module.train``)
+MODE_DEPENDENT_MODULES = (
+    nn.modules.dropout._DropoutNd,
+    nn.modules.batchnorm._BatchNorm,
+    nn.modules.instancenorm._InstanceNorm,
+)
 
 
 def action_offset(action_space: spaces.Space) -> np.ndarray | None:

@@ -341,6 +341,9 @@ class TileCoding(BaseFeaturesExtractor):
         # Derived from the arguments, so not saved in the state dict; buffers follow the policy's device
         for name, tensor in grid.tensors.items():
             self.register_buffer(f"_{name}", tensor, persistent=False)
+        # The same, as NumPy arrays, made on first use by the CPU path of forward
+        self._grid_names = tuple(grid.tensors)
+        self._numpy_grid: dict[str, np.ndarray] | None = None
 
     def active_tiles(self, observations: th.Tensor) -> th.Tensor:
         """
@@ -361,11 +364,35 @@ class TileCoding(BaseFeaturesExtractor):
         :param observations: a batch of observations, shape (batch, *obs_shape)
         :return: the binary tile features x(s), shape (batch, features_dim), float32, n_tilings ones per row
         """
+        if observations.device.type == "cpu" and self.hash_size is None:
+            return th.from_numpy(self._dense_features_numpy(observations.detach().numpy()))
         indices = self.active_tiles(observations)
         features = th.zeros(len(indices), self.features_dim, dtype=th.float32, device=indices.device)
         ones = th.ones(indices.shape, dtype=th.float32, device=indices.device)
         # Hashed tiles may collide: count them, so that w·x = Σ_t w[index_t] as with tiles3
         return features.scatter_add_(1, indices, ones)
+
+    def _dense_features_numpy(self, observations: np.ndarray) -> np.ndarray:
+        """
+        ``forward`` for a batch on the CPU without hashing: the same float64 arithmetic as ``_coordinates`` and
+        ``_indices`` in NumPy, whose calls on a small batch cost a fraction of PyTorch's (the per-step loop computes
+        the features of one observation two or three times per env step).
+
+        :param observations: a batch of observations, shape (batch, *obs_shape)
+        :return: the binary tile features, shape (batch, features_dim), float32
+        """
+        if self._numpy_grid is None:
+            self._numpy_grid = {name: self.get_buffer(f"_{name}").cpu().numpy() for name in self._grid_names}
+        grid = self._numpy_grid
+        x = np.clip(observations.reshape(len(observations), -1).astype(np.float64), grid["low"], grid["high"])
+        # As _coordinates: f = tiles_per_dim·(x − origin)/(high − low), q = ⌊f·n_tilings⌋, c = ⌊(q + t(2d+1))/n_tilings⌋
+        scaled = grid["tiles_per_dim"] * (x - grid["origin"]) / (grid["high"] - grid["low"])
+        quantized = np.floor(scaled * self.n_tilings).astype(np.int64)
+        coordinates = (quantized[:, None, :] + grid["offsets"]) // self.n_tilings
+        indices = grid["tiling_starts"] + ((coordinates - grid["first_tiles"]) * grid["strides"]).sum(axis=-1)
+        features = np.zeros((len(observations), self.features_dim), dtype=np.float32)
+        np.put_along_axis(features, indices, 1.0, axis=1)
+        return features
 
     def extra_repr(self) -> str:
         settings: dict[str, Any] = dict(

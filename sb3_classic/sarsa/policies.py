@@ -18,7 +18,7 @@ from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from stable_baselines3.dqn.policies import QNetwork
 from torch import nn
 
-from sb3_classic.common.policies import EnvActionsMixin
+from sb3_classic.common.policies import MODE_DEPENDENT_MODULES, EnvActionsMixin
 from sb3_classic.common.torch_layers import (
     check_weight_init,
     constant_init,
@@ -132,6 +132,8 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             for module in hidden:
                 module.apply(lambda layer: self.init_weights(layer, gain=np.sqrt(2)))
             output.apply(lambda layer: self.init_weights(layer, gain=1.0))
+        # Whether any module's forward depends on train/eval mode (see set_training_mode)
+        self._mode_dependent = any(isinstance(module, MODE_DEPENDENT_MODULES) for module in self.q_net.modules())
         self.q_net_target: QNetwork | None = None
         if target_network:
             self.q_net_target = copy.deepcopy(self.q_net)
@@ -176,6 +178,11 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             per-step loop switches at every env step, and ``nn.Module.train`` visits every submodule)
         """
         if self.training == mode and self.q_net.training == mode:
+            return
+        if not self._mode_dependent:
+            # No module behaves differently in the two modes (no dropout, no batch norm): only the flags change, which
+            # saves the per-step loop a walk over every submodule twice per env step
+            self.training = self.q_net.training = mode
             return
         self.q_net.set_training_mode(mode)
         self.training = mode
