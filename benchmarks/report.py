@@ -3,6 +3,7 @@
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -89,6 +90,55 @@ def episodes_by(end_steps: np.ndarray, step: int) -> int:
     return int((np.asarray(end_steps) <= step).sum())
 
 
+def stayed_counts(mean_returns: np.ndarray, threshold: float) -> tuple[int, int] | None:
+    """
+    :param mean_returns: a run's evaluation mean returns, in order
+    :param threshold: the return to reach
+    :return: of the evaluations after the first one that reaches ``threshold``, how many are still ≥ ``threshold``
+        and how many there are; None if the run never reaches it
+    """
+    reached = np.flatnonzero(np.asarray(mean_returns) >= threshold)
+    if not len(reached):
+        return None
+    later = np.asarray(mean_returns)[reached[0] + 1 :]
+    return int((later >= threshold).sum()), len(later)
+
+
+def stability(mean_returns_by_run: dict[Any, np.ndarray], threshold: float) -> dict[str, Any]:
+    """
+    How well the runs of one algorithm stay at the threshold once they reach it.
+
+    :param mean_returns_by_run: per run (seed), its evaluation mean returns in order
+    :param threshold: the return to reach
+    :return: ``runs``; ``reached`` (runs with an evaluation ≥ threshold); ``final_at`` (runs whose final evaluation is
+        ≥ threshold); ``stayed_pooled`` (of all the evaluations after each run's first reaching one, pooled over runs,
+        the fraction ≥ threshold; NaN if there are none); ``stayed_median`` and ``stayed_min`` (the same fraction per
+        run, median and minimum over the runs that have later evaluations)
+    """
+    kept, later, fractions = 0, 0, []
+    for mean_returns in mean_returns_by_run.values():
+        counts = stayed_counts(mean_returns, threshold)
+        if counts is None or counts[1] == 0:
+            continue
+        kept, later = kept + counts[0], later + counts[1]
+        fractions.append(counts[0] / counts[1])
+    finals = [np.asarray(mean_returns)[-1] for mean_returns in mean_returns_by_run.values() if len(mean_returns)]
+    return {
+        "runs": len(mean_returns_by_run),
+        "reached": sum(stayed_counts(r, threshold) is not None for r in mean_returns_by_run.values()),
+        "final_at": int(sum(final >= threshold for final in finals)),
+        "stayed_pooled": kept / later if later else float("nan"),
+        "stayed_median": float(np.median(fractions)) if fractions else float("nan"),
+        "stayed_min": float(np.min(fractions)) if fractions else float("nan"),
+    }
+
+
+def _stayed(stab: dict[str, Any]) -> str:
+    if np.isnan(stab["stayed_pooled"]):
+        return "–"
+    return f"{stab['stayed_pooled']:.0%} (worst seed {stab['stayed_min']:.0%})"
+
+
 def threshold_crossings(results: Results) -> pd.DataFrame:
     """
     :return: per run, ``steps_to_threshold`` (the env steps of its first evaluation whose mean return reaches the
@@ -140,12 +190,17 @@ def summary_table(results: Results, crossings: pd.DataFrame, env_id: str, algos:
     :return: the table, as strings
     """
     threshold = THRESHOLDS[env_id]
+    means = evaluation_means(results.evaluations)
     rows = []
     for algo in algos:
         runs = results.runs[(results.runs["algo"] == algo) & (results.runs["env_id"] == env_id)]
         crossed = crossings[(crossings["algo"] == algo) & (crossings["env_id"] == env_id)]
         if runs.empty:
             continue
+        algo_means = means[(means["algo"] == algo) & (means["env_id"] == env_id)]
+        stab = stability(
+            {seed: run["mean_return"].to_numpy() for seed, run in algo_means.groupby("seed", sort=True)}, threshold
+        )
         rows.append(
             {
                 "Algorithm": LABELS[algo],
@@ -153,6 +208,8 @@ def summary_table(results: Results, crossings: pd.DataFrame, env_id: str, algos:
                 "n_envs": ", ".join(map(str, sorted(runs["n_envs"].unique()))),
                 "Final eval return": _mean_std(crossed["final_return"]),
                 f"Seeds reaching {threshold:g}": f"{crossed['steps_to_threshold'].notna().sum()}/{len(runs)}",
+                f"Final ≥ {threshold:g}": f"{stab['final_at']}/{len(runs)}",
+                "Stayed": _stayed(stab),
                 "Env steps to threshold": _median_range(crossed["steps_to_threshold"]),
                 "Episodes to threshold": _median_range(crossed["episodes_to_threshold"]),
                 "Training episodes": _median_range(runs["n_episodes"]),

@@ -141,7 +141,9 @@ Produced by:
 
 Columns: *Final eval return*: the mean return of the evaluation at the end of training, mean ± std over seeds.
 *Env steps / Episodes to threshold*: at the first evaluation whose mean return reaches the threshold (episodes: the
-training episodes ended by then), median (min–max) over the seeds that reached it. *Learn time*: wall-clock seconds of
+training episodes ended by then), median (min–max) over the seeds that reached it. *Final ≥ threshold*: the seeds
+whose final evaluation is at the threshold. *Stayed*: of the evaluations after each seed's first one at the
+threshold, the fraction still at it, pooled over seeds (and the worst seed's fraction). *Learn time*: wall-clock seconds of
 `learn()` without the evaluations; *Env steps/s*: env steps over that time, each algorithm with its own `n_envs` (the
 zoo's): the like-for-like speed comparison is `throughput.md`. Plots: `<env>-episodes.png`, the
 training return of each episode (the seed report's figure; mean ± std over seeds, up to the episode count every seed

@@ -12,7 +12,16 @@ import pytest
 
 from benchmarks import hot_paths
 from benchmarks.common import REPO_ROOT
-from benchmarks.report import Results, episode_curves, episodes_by, first_crossing, summary_table, threshold_crossings
+from benchmarks.report import (
+    Results,
+    episode_curves,
+    episodes_by,
+    first_crossing,
+    stability,
+    stayed_counts,
+    summary_table,
+    threshold_crossings,
+)
 from benchmarks.run import FULL, QUICK, make_specs, parse_budgets
 from benchmarks.throughput import measure, throughput_ratios, throughput_table, time_breakdown_table
 from sb3_classic import NStepSARSA
@@ -124,6 +133,49 @@ def test_summary_table() -> None:
     assert row["Env steps to threshold"] == "2,500 (2,000–3,000)"
     assert row["Episodes to threshold"] == "7 (6–8)"
     assert row["Final eval return"] == f"335.0 ± {np.std([490.0, 475.0, 40.0], ddof=1):.1f}"
+    # Seeds 0 and 1 end at 475 or above; after their first evaluation at 475 seed 0 has one more (490), seed 1 none
+    assert row["Final ≥ 475"] == "2/3"
+    assert row["Stayed"] == "100% (worst seed 100%)"
+
+
+def test_stayed_counts() -> None:
+    # Acrobot: the threshold is negative, reaching it counts, the first reaching evaluation is not counted again
+    assert stayed_counts(np.array([-500.0, -100.0, -90.0, -500.0, -95.0]), -100.0) == (2, 3)
+    assert stayed_counts(np.array([-500.0, -300.0]), -100.0) is None
+    assert stayed_counts(np.array([-500.0, -99.0]), -100.0) == (0, 0)
+
+
+def test_stability_pools_later_evaluations_and_reports_the_worst_seed() -> None:
+    runs = {
+        # reaches at index 1, then 3 of 4 later evaluations stay
+        0: np.array([-500.0, -90.0, -95.0, -500.0, -80.0, -85.0]),
+        # reaches at index 0, then 1 of 2 stays, and ends below
+        1: np.array([-100.0, -80.0, -120.0]),
+        # never reaches
+        2: np.array([-500.0, -500.0, -500.0]),
+        # reaches only at its last evaluation: no later evaluations, nothing to pool
+        3: np.array([-500.0, -300.0, -99.0]),
+    }
+    stab = stability(runs, -100.0)
+    assert stab["runs"] == 4
+    assert stab["reached"] == 3
+    assert stab["final_at"] == 2
+    assert stab["stayed_pooled"] == pytest.approx(4 / 6)
+    assert stab["stayed_median"] == pytest.approx((0.75 + 0.5) / 2)
+    assert stab["stayed_min"] == 0.5
+    assert np.isnan(stability({0: np.array([-500.0, -99.0])}, -100.0)["stayed_pooled"])
+
+
+def test_summary_table_stability_columns() -> None:
+    results = synthetic_results()
+    # Seed 0 falls back below 475 at the end: 480, then 400
+    seed0_last = (results.evaluations["seed"] == 0) & (results.evaluations["eval_index"] == 2)
+    results.evaluations.loc[seed0_last, "return"] -= 90.0
+    row = summary_table(results, threshold_crossings(results), "CartPole-v1", ["reinforce"]).iloc[0]
+    assert row["Seeds reaching 475"] == "2/3"
+    assert row["Final ≥ 475"] == "1/3"
+    # Only seed 0 has evaluations after its first at 475 (one, at 400)
+    assert row["Stayed"] == "0% (worst seed 0%)"
 
 
 def test_run_key_covers_what_changes_the_result(tmp_path: Path) -> None:

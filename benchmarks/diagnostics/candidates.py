@@ -1,0 +1,157 @@
+"""
+Candidate fixes of issue 13, built as subclasses of the package's algorithms so that the diagnostic studies can
+measure them before they are built properly: a bootstrap (target) network and LayerNorm for NStepSARSA, per-update
+records for both algorithms. Nothing here changes ``sb3_classic``.
+"""
+
+import copy
+from typing import Any
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.type_aliases import Schedule
+from stable_baselines3.common.utils import polyak_update
+from torch import nn
+
+from sb3_classic import REINFORCE, NStepSARSA
+from sb3_classic.common.buffers import TrainingBatch
+from sb3_classic.sarsa.policies import SARSAPolicy
+
+
+class LayerNormSARSAPolicy(SARSAPolicy):
+    """
+    ``SARSAPolicy`` with ``layer_norm=True``: a LayerNorm after each hidden Linear layer, before its activation
+    (CleanRL's PQN Q-network). The Linear layers keep their initialisation.
+
+    :param layer_norm: insert the LayerNorms
+    :param kwargs: the arguments of ``SARSAPolicy``
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Discrete,
+        lr_schedule: Schedule,
+        layer_norm: bool = False,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(observation_space, action_space, lr_schedule, **kwargs)
+        self.layer_norm = layer_norm
+        if layer_norm:
+            layers = list(self.q_net.q_net)
+            rebuilt: list[nn.Module] = []
+            for index, layer in enumerate(layers):
+                rebuilt.append(layer)
+                if isinstance(layer, nn.Linear) and index < len(layers) - 1:
+                    rebuilt.append(nn.LayerNorm(layer.out_features))
+            self.q_net.q_net = nn.Sequential(*rebuilt)
+            defaults = {key: value for key, value in self.optimizer.defaults.items() if key != "lr"}
+            self.optimizer = self.optimizer_class(self.q_net.parameters(), lr=lr_schedule(1), **defaults)  # type: ignore[call-arg]
+
+
+class CandidateSARSA(NStepSARSA):
+    """
+    ``NStepSARSA`` with a bootstrap network (SB3 DQN's names): the n-step targets bootstrap from ``q_net_target``,
+    which follows the online network by ``polyak_update(tau)`` every ``target_update_interval`` env steps (0: no
+    target network, the package's algorithm). ``policy_kwargs=dict(layer_norm=True)`` adds LayerNorm. Keeps a record
+    of every update in ``update_records``.
+
+    :param target_update_interval: env steps (all envs together) between two updates of the target network; 0 for none
+    :param tau: the Polyak coefficient of those updates (1: a copy)
+    :param kwargs: the arguments of ``NStepSARSA``
+    """
+
+    policy_aliases = {**NStepSARSA.policy_aliases, "MlpPolicy": LayerNormSARSAPolicy}  # noqa: RUF012
+
+    def __init__(self, *args: Any, target_update_interval: int = 0, tau: float = 1.0, **kwargs: Any):
+        self.target_update_interval = target_update_interval
+        self.tau = tau
+        self.update_records: list[dict[str, float]] = []
+        super().__init__(*args, **kwargs)
+
+    def _setup_model(self) -> None:
+        super()._setup_model()
+        self.q_net_target: nn.Module | None = None
+        if self.target_update_interval > 0:
+            self.q_net_target = copy.deepcopy(self.policy.q_net)
+            self.q_net_target.requires_grad_(False)
+        self._last_target_update = 0
+
+    def _training_batch(self) -> TrainingBatch | None:
+        if self.q_net_target is None:
+            return super()._training_batch()
+        online = self.policy.q_net
+        self.policy.q_net = self.q_net_target  # type: ignore[assignment]
+        try:
+            return super()._training_batch()
+        finally:
+            self.policy.q_net = online
+
+    def train(self) -> None:
+        super().train()
+        if self.q_net_target is not None and self.num_timesteps - self._last_target_update >= self.target_update_interval:
+            polyak_update(self.policy.q_net.parameters(), self.q_net_target.parameters(), self.tau)
+            self._last_target_update = self.num_timesteps
+        values = self.logger.name_to_value
+        if "train/loss" in values:
+            self.update_records.append(
+                {
+                    "timesteps": self.num_timesteps,
+                    "loss": values["train/loss"],
+                    "q_mean": values["train/q_mean"],
+                    "target_mean": values["train/target_mean"],
+                    "learning_rate": values["train/learning_rate"],
+                    "exploration_rate": self.exploration_rate,
+                }
+            )
+
+
+class RecordedREINFORCE(REINFORCE):
+    """``REINFORCE`` that keeps a record of every update (losses, entropy, explained variance) in ``update_records``."""
+
+    def __init__(self, *args: Any, **kwargs: Any):
+        self.update_records: list[dict[str, float]] = []
+        super().__init__(*args, **kwargs)
+
+    def train(self) -> None:
+        n_updates = self._n_updates
+        super().train()
+        if self._n_updates == n_updates:
+            return
+        values = self.logger.name_to_value
+        self.update_records.append(
+            {
+                "timesteps": self.num_timesteps,
+                "episodes": self._completed_episodes,
+                "policy_loss": values["train/policy_loss"],
+                "value_loss": values["train/value_loss"],
+                "entropy": -values["train/entropy_loss"],
+                "explained_variance": values["train/explained_variance"],
+                "ep_return": float(np.mean([info["r"] for info in list(self.ep_info_buffer)[-1:]]))
+                if self.ep_info_buffer
+                else float("nan"),
+            }
+        )
+
+
+def sarsa_probe(model: Any, obs: th.Tensor) -> dict[str, np.ndarray]:
+    """
+    :return: per state, ``value`` (max_a q̂, the greedy policy's value estimate), ``gap`` (max − second max: how
+        decisive the greedy action is), ``spread`` (max − min), ``small_gap`` (1 if gap < 0.1, the return of a tenth of a step)
+    """
+    q = model.policy.q_net(obs)
+    top = th.sort(q, dim=1, descending=True).values.cpu().numpy()
+    gap = top[:, 0] - top[:, 1]
+    return {"value": top[:, 0], "gap": gap, "spread": top[:, 0] - top[:, -1], "small_gap": (gap < 0.1).astype(float)}
+
+
+def reinforce_probe(model: Any, obs: th.Tensor) -> dict[str, np.ndarray]:
+    """:return: per state, the policy's ``entropy``, its largest action probability ``p_max``, and ``value`` (v̂)"""
+    distribution = model.policy.get_distribution(obs)
+    probs = distribution.distribution.probs
+    return {
+        "entropy": distribution.entropy().cpu().numpy(),
+        "p_max": probs.max(dim=1).values.cpu().numpy(),
+        "value": model.policy.predict_values(obs).flatten().cpu().numpy(),
+    }

@@ -1,0 +1,88 @@
+"""
+Why NStepSARSA's greedy policy falls into −500 loops on Acrobot-v1 with the YAML settings, and which change fixes it.
+
+    python -m benchmarks.diagnostics.sarsa_acrobot --list
+    python -m benchmarks.diagnostics.sarsa_acrobot --variants yaml,layer_norm --seeds 0-4
+
+Each evaluation records, over the states the greedy policy visits: max_a q̂ (``value``), the gap between the best
+and second-best action values (``gap``), the fraction of states with a gap under 0.1 (``small_gap``), the discounted
+return-to-go actually obtained (``g_true``; −1/(1−γ) = −100 is the bound of a policy that never swings up) and
+``bias`` = value − g_true, each also split by episodes that loop to the time limit (``loop_``) and those that reach
+the goal (``goal_``); and the learning rate and ε at that moment.
+"""
+
+from benchmarks.diagnostics.candidates import CandidateSARSA, sarsa_probe
+from benchmarks.diagnostics.common import Variant, run_study
+
+NET = "dict(net_arch=[256, 256], weight_init='default')"
+NET_LN = "dict(net_arch=[256, 256], weight_init='default', layer_norm=True)"
+
+VARIANTS = [
+    Variant("yaml", CandidateSARSA, {}, "hyperparams/nstep_sarsa.yml as committed"),
+    Variant("layer_norm", CandidateSARSA, {"policy_kwargs": NET_LN}, "LayerNorm after each hidden layer"),
+    Variant(
+        "target_2k",
+        CandidateSARSA,
+        {"target_update_interval": 2000, "tau": 1.0},
+        "bootstrap network copied every 2,000 env steps",
+    ),
+    Variant(
+        "polyak_0.05",
+        CandidateSARSA,
+        {"target_update_interval": 1, "tau": 0.05},
+        "bootstrap network, Polyak tau 0.05 after every update",
+    ),
+    Variant(
+        "eps_lin_0.1",
+        CandidateSARSA,
+        {"exploration_schedule": "linear", "exploration_fraction": 0.1},
+        "ε from 1 to 0.05 over the first 10% of the steps (SB3 DQN's schedule) instead of ×0.995 per episode",
+    ),
+    Variant(
+        "eps_lin_0.1_ln",
+        CandidateSARSA,
+        {"exploration_schedule": "linear", "exploration_fraction": 0.1, "policy_kwargs": NET_LN},
+        "linear ε and LayerNorm",
+    ),
+    Variant(
+        "eps_lin_0.1_target_2k",
+        CandidateSARSA,
+        {"exploration_schedule": "linear", "exploration_fraction": 0.1, "target_update_interval": 2000, "tau": 1.0},
+        "linear ε and a bootstrap network",
+    ),
+    Variant("lr_const_1e-3", CandidateSARSA, {"learning_rate": 1e-3}, "constant learning rate"),
+    Variant("lr_lin_3e-4", CandidateSARSA, {"learning_rate": "lin_3e-4"}, "lower learning rate"),
+    Variant("n8", CandidateSARSA, {"n_steps": 8}, "n = 8"),
+    Variant("plain_sarsa", CandidateSARSA, {"expected_sarsa": False}, "bootstrap from the action taken"),
+    Variant("envs16", CandidateSARSA, {"n_envs": 16}, "16 envs (twice the batch)"),
+    Variant(
+        "ln_target_2k",
+        CandidateSARSA,
+        {"policy_kwargs": NET_LN, "target_update_interval": 2000, "tau": 1.0},
+        "LayerNorm and a bootstrap network",
+    ),
+]
+
+PROBE_COLUMNS = [
+    "n_loops",
+    "gap",
+    "loop_gap",
+    "goal_gap",
+    "loop_small_gap",
+    "goal_small_gap",
+    "value",
+    "g_true",
+    "bias",
+    "loop_bias",
+    "learning_rate",
+    "exploration_rate",
+]
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Run the study's command line (see the module's docstring)."""
+    run_study("sarsa", "nstep_sarsa", "Acrobot-v1", VARIANTS, sarsa_probe, argv)
+
+
+if __name__ == "__main__":
+    main()
