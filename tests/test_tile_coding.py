@@ -366,7 +366,7 @@ def test_readme_tile_coding_example_runs() -> None:
 @pytest.mark.parametrize("origin", ORIGINS)
 def test_cpu_features_equal_the_tile_indices(origin: str) -> None:
     """``forward`` on the CPU (NumPy) puts its ones exactly at ``active_tiles`` (PyTorch), bounds and outside included."""
-    space = spaces.Box(np.array([-1.2, -0.07, 0.0]), np.array([0.5, 0.07, 3.0]), dtype=np.float32)
+    space = spaces.Box(np.array([-1.2, -0.07, 0.0], np.float32), np.array([0.5, 0.07, 3.0], np.float32), dtype=np.float32)
     coder = TileCoding(space, n_tilings=8, tiles_per_dim=(8, 6, 3), origin=origin)
     rng = np.random.default_rng(0)
     points = rng.uniform(space.low - 0.2, space.high + 0.2, size=(500, 3))
