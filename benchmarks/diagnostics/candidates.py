@@ -54,19 +54,32 @@ class CandidateSARSA(NStepSARSA):
     """
     ``NStepSARSA`` with a bootstrap network (SB3 DQN's names): the n-step targets bootstrap from ``q_net_target``,
     which follows the online network by ``polyak_update(tau)`` every ``target_update_interval`` env steps (0: no
-    target network, the package's algorithm). ``policy_kwargs=dict(layer_norm=True)`` adds LayerNorm. Keeps a record
-    of every update in ``update_records``.
+    target network, the package's algorithm). ``policy_kwargs=dict(layer_norm=True)`` adds LayerNorm.
+    ``target_exploration_rate``: the ε of the bootstrap expectation (the behaviour's if None; 0 with
+    ``expected_sarsa=True`` bootstraps from max_a q̂). Keeps a record of every update in ``update_records``.
 
     :param target_update_interval: env steps (all envs together) between two updates of the target network; 0 for none
     :param tau: the Polyak coefficient of those updates (1: a copy)
+    :param target_exploration_rate: ε of the bootstrap's ε-greedy expectation; None: the behaviour's
     :param kwargs: the arguments of ``NStepSARSA``
     """
 
     policy_aliases = {**NStepSARSA.policy_aliases, "MlpPolicy": LayerNormSARSAPolicy}  # noqa: RUF012
 
-    def __init__(self, *args: Any, target_update_interval: int = 0, tau: float = 1.0, **kwargs: Any):
+    #: The evaluation also runs the ε-greedy policy (``stochastic_mean_return``), to compare with the greedy one
+    diagnose_epsilon = True
+
+    def __init__(
+        self,
+        *args: Any,
+        target_update_interval: int = 0,
+        tau: float = 1.0,
+        target_exploration_rate: float | None = None,
+        **kwargs: Any,
+    ):
         self.target_update_interval = target_update_interval
         self.tau = tau
+        self.target_exploration_rate = target_exploration_rate
         self.update_records: list[dict[str, float]] = []
         super().__init__(*args, **kwargs)
 
@@ -77,6 +90,17 @@ class CandidateSARSA(NStepSARSA):
             self.q_net_target = copy.deepcopy(self.policy.q_net)
             self.q_net_target.requires_grad_(False)
         self._last_target_update = 0
+
+    def _bootstrap_values(self, q_values: th.Tensor) -> np.ndarray:
+        # target_exploration_rate=0 with expected_sarsa: bootstrap from max_a q̂ (n-step Q-learning, PQN's target)
+        if self.target_exploration_rate is None:
+            return super()._bootstrap_values(q_values)
+        behaviour = self.exploration_rate
+        self.exploration_rate = self.target_exploration_rate
+        try:
+            return super()._bootstrap_values(q_values)
+        finally:
+            self.exploration_rate = behaviour
 
     def _training_batch(self) -> TrainingBatch | None:
         if self.q_net_target is None:

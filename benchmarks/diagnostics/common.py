@@ -121,11 +121,26 @@ class ProbedEvaluation(BaseCallback):
             "returns": returns.tolist(),
             "lengths": lengths.tolist(),
         }
+        if getattr(model, "diagnose_epsilon", False):
+            row["stochastic_mean_return"] = self._stochastic_mean_return(model)
         if self.probe is not None:
             row.update(summarize_probe(probes_by_env, rewards_by_env, lengths, model.gamma))
         row.update(training_state(model))
         self.rows.append(row)
         self.eval_time += time.perf_counter() - start
+
+    def _stochastic_mean_return(self, model: Any) -> float:
+        """:return: the mean return of one episode per eval env with the behaviour policy (ε-greedy)"""
+        env = self.eval_env
+        obs = env.reset()
+        returns = np.zeros(env.num_envs)
+        done = np.zeros(env.num_envs, dtype=bool)
+        while not done.all():
+            actions, _ = model.predict(obs, deterministic=False)
+            obs, rewards, dones, _ = env.step(actions)
+            returns += np.where(done, 0.0, rewards)
+            done |= dones
+        return float(returns.mean())
 
 
 def summarize_probe(

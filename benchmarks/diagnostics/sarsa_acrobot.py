@@ -50,6 +50,43 @@ VARIANTS = [
         {"exploration_schedule": "linear", "exploration_fraction": 0.1, "target_update_interval": 2000, "tau": 1.0},
         "linear ε and a bootstrap network",
     ),
+    Variant(
+        "eps_lin_0.1_lr_3e-4",
+        CandidateSARSA,
+        {"exploration_schedule": "linear", "exploration_fraction": 0.1, "learning_rate": "lin_3e-4"},
+        "linear ε and a lower learning rate",
+    ),
+    Variant(
+        "eps_lin_0.1_lr_c3e-4",
+        CandidateSARSA,
+        {"exploration_schedule": "linear", "exploration_fraction": 0.1, "learning_rate": 3e-4},
+        "linear ε and a lower constant learning rate",
+    ),
+    Variant(
+        "eps_lin_0.1_max",
+        CandidateSARSA,
+        {"exploration_schedule": "linear", "exploration_fraction": 0.1, "target_exploration_rate": 0.0},
+        "linear ε, bootstrap from max_a q̂ (n-step Q-learning target, as PQN)",
+    ),
+    Variant(
+        "eps_lin_0.1_final_0.01",
+        CandidateSARSA,
+        {"exploration_schedule": "linear", "exploration_fraction": 0.1, "exploration_final_eps": 0.01},
+        "linear ε down to 0.01",
+    ),
+    Variant(
+        "eps_lin_0.1_lr_steps",
+        CandidateSARSA,
+        {
+            "exploration_schedule": "linear",
+            "exploration_fraction": 0.1,
+            "learning_rate": 1e-3,
+            "lr_decay_factor": 0.3,
+            "lr_decay_milestones": [400, 800],
+            "lr_decay_unit": "update",
+        },
+        "linear ε, lr 1e-3 then ×0.3 after 400 and 800 updates (51k and 102k steps)",
+    ),
     Variant("lr_const_1e-3", CandidateSARSA, {"learning_rate": 1e-3}, "constant learning rate"),
     Variant("lr_lin_3e-4", CandidateSARSA, {"learning_rate": "lin_3e-4"}, "lower learning rate"),
     Variant("n8", CandidateSARSA, {"n_steps": 8}, "n = 8"),
@@ -64,6 +101,7 @@ VARIANTS = [
 ]
 
 PROBE_COLUMNS = [
+    "stochastic_mean_return",
     "n_loops",
     "gap",
     "loop_gap",
