@@ -1,53 +1,16 @@
 """
-Candidate fixes of issue 13, built as subclasses of the package's algorithms so that the diagnostic studies can
-measure them before they are built properly: a bootstrap (target) network and LayerNorm for NStepSARSA, per-update
-records for both algorithms. Nothing here changes ``sb3_classic``.
+Candidate fixes of issue 13, built as subclasses of the package's algorithms so that the diagnostic studies could
+measure them before they were built: per-update records for both algorithms, and the ε of SARSA's bootstrap
+expectation. The bootstrap (target) network and LayerNorm measured here are now NStepSARSA's own options
+(``target_update_interval``/``tau``, ``policy_kwargs=dict(layer_norm=True)``), which this subclass passes on.
 """
 
-import copy
 from typing import Any
 
 import numpy as np
 import torch as th
-from gymnasium import spaces
-from stable_baselines3.common.type_aliases import Schedule
-from stable_baselines3.common.utils import polyak_update
-from torch import nn
 
 from sb3_classic import REINFORCE, NStepSARSA
-from sb3_classic.common.buffers import TrainingBatch
-from sb3_classic.sarsa.policies import SARSAPolicy
-
-
-class LayerNormSARSAPolicy(SARSAPolicy):
-    """
-    ``SARSAPolicy`` with ``layer_norm=True``: a LayerNorm after each hidden Linear layer, before its activation
-    (CleanRL's PQN Q-network). The Linear layers keep their initialisation.
-
-    :param layer_norm: insert the LayerNorms
-    :param kwargs: the arguments of ``SARSAPolicy``
-    """
-
-    def __init__(
-        self,
-        observation_space: spaces.Space,
-        action_space: spaces.Discrete,
-        lr_schedule: Schedule,
-        layer_norm: bool = False,
-        **kwargs: Any,
-    ) -> None:
-        super().__init__(observation_space, action_space, lr_schedule, **kwargs)
-        self.layer_norm = layer_norm
-        if layer_norm:
-            layers = list(self.q_net.q_net)
-            rebuilt: list[nn.Module] = []
-            for index, layer in enumerate(layers):
-                rebuilt.append(layer)
-                if isinstance(layer, nn.Linear) and index < len(layers) - 1:
-                    rebuilt.append(nn.LayerNorm(layer.out_features))
-            self.q_net.q_net = nn.Sequential(*rebuilt)
-            defaults = {key: value for key, value in self.optimizer.defaults.items() if key != "lr"}
-            self.optimizer = self.optimizer_class(self.q_net.parameters(), lr=lr_schedule(1), **defaults)  # type: ignore[call-arg]
 
 
 class CandidateSARSA(NStepSARSA):
@@ -64,32 +27,22 @@ class CandidateSARSA(NStepSARSA):
     :param kwargs: the arguments of ``NStepSARSA``
     """
 
-    policy_aliases = {**NStepSARSA.policy_aliases, "MlpPolicy": LayerNormSARSAPolicy}  # noqa: RUF012
-
     #: The evaluation also runs the ε-greedy policy (``stochastic_mean_return``), to compare with the greedy one
     diagnose_epsilon = True
 
     def __init__(
         self,
-        *args: Any,
+        policy: Any,
+        env: Any,
         target_update_interval: int = 0,
         tau: float = 1.0,
         target_exploration_rate: float | None = None,
         **kwargs: Any,
     ):
-        self.target_update_interval = target_update_interval
-        self.tau = tau
         self.target_exploration_rate = target_exploration_rate
         self.update_records: list[dict[str, float]] = []
-        super().__init__(*args, **kwargs)
-
-    def _setup_model(self) -> None:
-        super()._setup_model()
-        self.q_net_target: nn.Module | None = None
-        if self.target_update_interval > 0:
-            self.q_net_target = copy.deepcopy(self.policy.q_net)
-            self.q_net_target.requires_grad_(False)
-        self._last_target_update = 0
+        # The bootstrap network and LayerNorm are NStepSARSA's own options now (0 here: none)
+        super().__init__(policy, env, target_update_interval=target_update_interval or None, tau=tau, **kwargs)
 
     def _bootstrap_values(self, q_values: th.Tensor) -> np.ndarray:
         # target_exploration_rate=0 with expected_sarsa: bootstrap from max_a q̂ (n-step Q-learning, PQN's target)
@@ -102,21 +55,8 @@ class CandidateSARSA(NStepSARSA):
         finally:
             self.exploration_rate = behaviour
 
-    def _training_batch(self) -> TrainingBatch | None:
-        if self.q_net_target is None:
-            return super()._training_batch()
-        online = self.policy.q_net
-        self.policy.q_net = self.q_net_target  # type: ignore[assignment]
-        try:
-            return super()._training_batch()
-        finally:
-            self.policy.q_net = online
-
     def train(self) -> None:
         super().train()
-        if self.q_net_target is not None and self.num_timesteps - self._last_target_update >= self.target_update_interval:
-            polyak_update(self.policy.q_net.parameters(), self.q_net_target.parameters(), self.tau)
-            self._last_target_update = self.num_timesteps
         values = self.logger.name_to_value
         if "train/loss" in values:
             self.update_records.append(
