@@ -179,4 +179,5 @@ def test_readme_figure_snippet_runs() -> None:
     exec(compile(code, "README.md book's figures", "exec"), namespace)
     model = namespace["model"]
     assert isinstance(model, REINFORCE)
+    assert model.ep_info_buffer is not None
     assert len(model.ep_info_buffer) == 5
