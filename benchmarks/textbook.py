@@ -402,8 +402,8 @@ QUICK = Plan(
     runs=dict.fromkeys(FIGURES, 2),
     random_walk_alphas={1: (0.6,), 4: (0.4,), 16: (0.1,)},
     mountain_car_alphas={1: (0.5,), 8: (0.3,)},
-    mountain_car_episodes=2,
-    mountain_car_first=2,
+    mountain_car_episodes=1,
+    mountain_car_first=1,
     snapshots=(1,),
     corridor_episodes=10,
 )
