@@ -16,6 +16,7 @@ ratio is the package's steps/s over the loop's of the same repeat; the table giv
 
 import argparse
 import itertools
+import os
 import platform
 import shlex
 import statistics
@@ -202,6 +203,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--output", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
     th.set_num_threads(1)
+    load_before = os.getloadavg()[0]
     rows = []
     for name, package, loop, loop_name, target in COMPARISONS:
         package(500, 0), loop(500, 0)  # warm-up: imports, first calls
@@ -219,6 +221,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         print(row, flush=True)
         rows.append(row)
+    load = f"load average {load_before:.1f} before, {os.getloadavg()[0]:.1f} after, on {os.cpu_count()} cores"
     command = "python -m benchmarks.per_step_speed " + shlex.join(sys.argv[1:] if argv is None else argv)
     text = f"""# Per-step speed against hand-written loops
 
@@ -228,7 +231,7 @@ Produced by:
 {command.strip()}
 ```
 
-sb3_classic {sb3_classic.__version__}, torch {th.__version__}, 1 thread, CPU ({platform.machine()}); {args.steps:,} env
+sb3_classic {sb3_classic.__version__}, torch {th.__version__}, 1 thread, CPU ({platform.machine()}, {load}); {args.steps:,} env
 steps of training from scratch per timed run, {args.repeats} repeats, the package and the loop back to back in each
 (order alternating). Steps/s: medians; ratio: median (min–max) of the package's over the loop's of the same repeat.
 The loops are in `benchmarks/per_step_speed.py`: `numpy_tile_sarsa` is the box of S&B §10.2 with the same tiles,

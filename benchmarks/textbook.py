@@ -64,6 +64,12 @@ FIGURES = ("7.2", "10.1", "10.3", "10.4", "13.1", "13.2")
 #: counts them (``origin="zero"``), one weight vector per action (a linear q̂ with one output per action)
 MOUNTAIN_CAR_TILES: dict[str, Any] = dict(n_tilings=8, tiles_per_dim=8, low=(-1.2, -0.07), high=(0.5, 0.07), origin="zero")
 MOUNTAIN_CAR_FEATURES: dict[str, Any] = dict(features_extractor_class=TileCoding, features_extractor_kwargs=MOUNTAIN_CAR_TILES)
+#: An episode this long ends its run as diverged. Plain REINFORCE on the short corridor (no clamp of π, as in the
+#: book's pseudocode; the book's code keeps π ≥ 0.05) can overshoot after a long episode: the per-step updates of one
+#: episode of a few thousand steps move θ by hundreds, π(right) rounds to 0 or 1, and no later episode ends (always
+#: left stays in s0, always right bounces between s0 and s1). The longest episode of a run that recovered was 12,826
+#: steps; 50,000 is about 2 minutes of training.
+DIVERGED_LENGTH = 50_000
 #: The short corridor's initial policy of the book's code: θ = (θ_right, θ_left) = (−1.47, 1.47), π(right) ≈ 0.05
 CORRIDOR_THETA_RIGHT, CORRIDOR_THETA_LEFT = -1.47, 1.47
 
@@ -149,7 +155,7 @@ def load_cached(cache_dir: Path, run: Run, versions: str) -> dict[str, Any] | No
     if not path.exists():
         return None
     result: dict[str, Any] = json.loads(path.read_text())
-    return result if result["episodes"] >= run.episodes or result["capped"] else None
+    return result if result["episodes"] >= run.episodes or result["capped"] or result.get("diverged") else None
 
 
 # --- The models, as a student would build them -----------------------------------------------------------------------
@@ -197,12 +203,17 @@ def make_model(setting: Setting, seed: int) -> NStepSARSA | REINFORCE:
         seed=seed,
         device="cpu",
     )
-    # The book's initial policy, π(right) ≈ 0.05: logits h(s, a, θ) = action_net.weight[a, 0] (0 = left, 1 = right)
+    # The book's initial policy, π(right) ≈ 0.05
+    set_corridor_logits(model, left=CORRIDOR_THETA_LEFT, right=CORRIDOR_THETA_RIGHT)
+    return model
+
+
+def set_corridor_logits(model: REINFORCE, left: float, right: float) -> None:
+    """Set θ of the short corridor's linear policy: its logits h(s, a, θ) are action_net.weight[a, 0] (0 left, 1 right)."""
     action_net = model.policy.action_net
     assert isinstance(action_net, th.nn.Linear)
     with th.no_grad():
-        action_net.weight.copy_(th.tensor([[CORRIDOR_THETA_LEFT], [CORRIDOR_THETA_RIGHT]]))
-    return model
+        action_net.weight.copy_(th.tensor([[left], [right]]))
 
 
 def linear_weights(model: BaseAlgorithm) -> np.ndarray:
@@ -244,16 +255,27 @@ class EpisodeRecorder(BaseCallback):
     after the last measure (a callback that stopped at the last step of episode N, as ``StopTrainingOnMaxEpisodes``
     does, would leave episode N's updates unmade).
 
+    An episode that reaches ``diverged_length`` steps stops training too, and sets ``diverged``: a policy whose
+    probabilities have rounded to 0 or 1 never leaves the short corridor (see ``DIVERGED_LENGTH``).
+
     :param n_episodes: episodes to train for
     :param measure: what to record after an episode's updates, or None
     :param measure_at: the episodes (counted from 1) to measure after; None for every episode
+    :param diverged_length: the episode length at which a run is declared diverged and stopped; None: never
     """
 
     def __init__(
-        self, n_episodes: int, measure: Callable[[BaseAlgorithm], Any] | None = None, measure_at: Iterable[int] | None = None
+        self,
+        n_episodes: int,
+        measure: Callable[[BaseAlgorithm], Any] | None = None,
+        measure_at: Iterable[int] | None = None,
+        diverged_length: int | None = None,
     ) -> None:
         super().__init__()
         self.n_episodes = n_episodes
+        self.diverged_length = diverged_length
+        self.diverged = False
+        self._episode_length = 0
         self.measure = measure
         self.measure_at = None if measure_at is None else set(measure_at)
         self.lengths: list[int] = []
@@ -271,8 +293,13 @@ class EpisodeRecorder(BaseCallback):
         self._unmeasured = []
 
     def _on_step(self) -> bool:
+        self._episode_length += 1
+        if self.diverged_length is not None and self._episode_length >= self.diverged_length:
+            self.diverged = True
+            return False
         for info in self.locals["infos"]:
             if "episode" in info:
+                self._episode_length = 0
                 self.lengths.append(int(info["episode"]["l"]))
                 self.returns.append(float(info["episode"]["r"]))
                 if self._wanted(len(self.lengths)):
@@ -292,11 +319,12 @@ def train_run(run: Run) -> dict[str, Any]:
     setting = run.setting
     model = make_model(setting, run.seed)
     if setting.task == "random_walk":
-        recorder = EpisodeRecorder(run.episodes, random_walk_rms)
+        recorder = EpisodeRecorder(run.episodes, random_walk_rms, diverged_length=DIVERGED_LENGTH)
     elif setting.snapshots:
-        recorder = EpisodeRecorder(run.episodes, cost_to_go, [e for e in setting.snapshots if e <= run.episodes])
+        snapshots = [e for e in setting.snapshots if e <= run.episodes]
+        recorder = EpisodeRecorder(run.episodes, cost_to_go, snapshots, diverged_length=DIVERGED_LENGTH)
     else:
-        recorder = EpisodeRecorder(run.episodes)
+        recorder = EpisodeRecorder(run.episodes, diverged_length=DIVERGED_LENGTH)
     # A cap on env steps, so that a diverging setting cannot run forever (no setting used here comes near it)
     cap = run.episodes * (100_000 if setting.task == "mountain_car" else 10_000)
     start = time.perf_counter()
@@ -305,7 +333,8 @@ def train_run(run: Run) -> dict[str, Any]:
     n = min(len(recorder.lengths), run.episodes)
     result: dict[str, Any] = dict(
         episodes=n,
-        capped=n < run.episodes,
+        capped=n < run.episodes and not recorder.diverged,
+        diverged=recorder.diverged,
         lengths=recorder.lengths[:n],
         returns=recorder.returns[:n],
         num_timesteps=int(model.num_timesteps),
@@ -501,6 +530,15 @@ class SettingRuns:
         se = per_run.std(ddof=1) / math.sqrt(len(per_run)) if len(per_run) > 1 else math.nan
         return float(per_run.mean()), float(se), len(per_run)
 
+    def diverged_before(self, episodes: int) -> int:
+        """:return: how many runs diverged before ``episodes`` episodes (left out of every mean that needs them)"""
+        return sum(1 for run in self.data if run.get("diverged") and run["episodes"] < episodes)
+
+    def runs_text(self, episodes: int, used: int) -> str:
+        """:return: the runs used for a mean over the first ``episodes`` episodes, and the diverged ones left out"""
+        diverged = self.diverged_before(episodes)
+        return f"{used} (+{diverged} diverged)" if diverged else str(used)
+
     @property
     def steps_per_second(self) -> float:
         return sum(run["num_timesteps"] for run in self.data) / max(sum(run["seconds"] for run in self.data), 1e-9)
@@ -580,9 +618,8 @@ def book_table(plan: Plan, cache_dir: Path, versions: str) -> tuple[str, list[di
         digits = 3 if number.key == "rms" else 1
         book = fmt(number.book, number.book_se if number.book_se is not None else math.nan, digits)
         check = agreement(mean, se, number.book, number.book_se)
-        lines.append(
-            f"| {number.figure} | {number.setting.label} | {number.what} | {book} | {fmt(mean, se, digits)} | {n} | {check} |"
-        )
+        used, ours = runs.runs_text(number.last, n), fmt(mean, se, digits)
+        lines.append(f"| {number.figure} | {number.setting.label} | {number.what} | {book} | {ours} | {used} | {check} |")
         rows.append(dict(figure=number.figure, setting=number.setting.label, mean=mean, se=se, runs=n, book=number.book))
     # Fig 10.4: each n's best α among those run
     fig_10_4 = [runs for runs in collect(plan, "10.4", cache_dir, versions) if runs.n_runs]
@@ -732,7 +769,9 @@ def settings_table(plan: Plan, figure: str, cache_dir: Path, versions: str) -> s
             last = plan.corridor_episodes
             measure = fmt(*group.window("returns", 1, last)[:2], 2) + f" return, episodes 1–{last}"
         rate = f"{group.steps_per_second:,.0f}" if group.n_runs else "–"
-        lines.append(f"| {group.setting.label} | {group.n_runs} | {measure} | {rate} |")
+        diverged = sum(1 for run in group.data if run.get("diverged"))
+        runs = f"{group.n_runs} ({diverged} diverged)" if diverged else str(group.n_runs)
+        lines.append(f"| {group.setting.label} | {runs} | {measure} | {rate} |")
     return "\n".join(lines)
 
 
@@ -746,7 +785,13 @@ FIGURE_NOTES = {
     "10.3": "Steps per episode of one-step (α = 0.5/8) and 8-step (α = 0.3/8) semi-gradient SARSA, averaged over runs.",
     "10.4": "Mean steps per episode over the first 50 episodes, for each n and α run (error bars: standard errors). The "
     "runs of n = 1, α = 0.5/8 and n = 8, α = 0.3/8 are Fig 10.3's first 50 episodes.",
-    "13.1": "Plain REINFORCE (§13.3) on the short corridor, total reward per episode averaged over runs, with v*(s0).",
+    "13.1": "Plain REINFORCE (§13.3) on the short corridor, total reward per episode averaged over runs, with v*(s0). "
+    "The curves average the runs that completed all their episodes. Plain REINFORCE as the book's pseudocode has it (no "
+    "clamp of π) can diverge: after an episode of a few thousand steps, the per-step updates of that one episode move θ "
+    "by hundreds (each ∇ln π is taken at the θ the previous step left, and |G_t| is in the thousands), π(right) rounds "
+    "to 0 or 1, and the corridor is never left again (seed 0 of α = 2^-13: episode 42 of 933 steps took θ to "
+    "(θ_left, θ_right) = (−2.8, 2.8), episode 45 of 2,562 steps to (268, −268); episode 46 never ended). The book's "
+    "code keeps π ≥ 0.05, which prevents it; the package does what the pseudocode says.",
     "13.2": "REINFORCE with baseline (α^θ = 2^-9, α^w = 2^-6) against plain REINFORCE (α = 2^-13).",
 }
 
@@ -790,9 +835,11 @@ CPU ({platform.machine()}, {os.cpu_count()} cores).{spent}
 
 Runs per setting: {runs}. Seeds 0, 1, …; every algorithm is the package's per-step mode with plain SGD on a linear
 q̂ or policy without bias, weights 0 (the book's; `tests/test_book_updates.py` checks the updates against a
-transcription of the boxes). Standard errors (SE) are over runs: the sample standard deviation of each run's mean over
-the episodes named, divided by √runs. "Within 2 SE": |ours − book| ≤ 2 √(SE_ours² + SE_book²) (the book's SE taken as
-0 where it gives none).
+transcription of the boxes). A run whose episode reaches {DIVERGED_LENGTH:,} steps is stopped as diverged (the
+policy's probabilities have rounded to 0 or 1: see the notes of Figs 13.1–13.2); the means that need episodes it did not
+reach leave it out, and the tables count it ("+k diverged"). Standard errors (SE) are over runs: the sample standard
+deviation of each run's mean over the episodes named, divided by √runs. "Within 2 SE": |ours − book| ≤
+2 √(SE_ours² + SE_book²) (the book's SE taken as 0 where it gives none).
 
 ## The book's numbers beside ours
 

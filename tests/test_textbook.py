@@ -181,3 +181,15 @@ def test_readme_figure_snippet_runs() -> None:
     assert isinstance(model, REINFORCE)
     assert model.ep_info_buffer is not None
     assert len(model.ep_info_buffer) == 5
+
+
+def test_a_run_that_never_leaves_the_corridor_is_stopped_as_diverged() -> None:
+    """π(right) rounded to 0 (θ_left ≫ θ_right): "left" in s0 stays there, the episode never ends."""
+    model = make_model(Setting("corridor", 2.0**-13), seed=0)
+    assert isinstance(model, REINFORCE)
+    textbook.set_corridor_logits(model, left=300.0, right=-300.0)
+    recorder = EpisodeRecorder(5, diverged_length=200)
+    model.learn(10_000, callback=recorder)
+    assert recorder.diverged
+    assert recorder.lengths == []
+    assert model.num_timesteps == 200
