@@ -30,7 +30,7 @@ def corridor_reinforce(
     rng = np.random.default_rng(seed)
     theta = np.array([-1.47, 1.47])  # (right, left)
     w = 0.0
-    returns = []
+    returns: list[float] = []
 
     def policy() -> np.ndarray:
         z = np.exp(theta - theta.max())
