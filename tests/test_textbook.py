@@ -10,10 +10,14 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import DummyVecEnv
 
 from benchmarks import textbook
 from benchmarks.per_step_speed import numpy_tile_sarsa
@@ -193,3 +197,38 @@ def test_a_run_that_never_leaves_the_corridor_is_stopped_as_diverged() -> None:
     assert recorder.diverged
     assert recorder.lengths == []
     assert model.num_timesteps == 200
+
+
+def test_corridor_run_is_the_books_box_replayed() -> None:
+    """
+    ``make_model``'s REINFORCE with baseline on the short corridor, from the book's initial θ, ends where the box of
+    §13.4 (in NumPy) ends on the same actions: what differs between our runs and the book's is the random draws.
+    """
+    actions: list[list[int]] = [[]]
+
+    class Record(gym.Wrapper):
+        def step(self, action: Any) -> Any:
+            result = self.env.step(action)
+            actions[-1].append(int(action))
+            if result[2]:
+                actions.append([])
+            return result
+
+    model = make_model(Setting("corridor", 2.0**-9, alpha_w=2.0**-6), seed=4)
+    assert isinstance(model, REINFORCE)
+    model.set_env(DummyVecEnv([lambda: Monitor(Record(gym.make("sb3_classic/ShortCorridor-v0")))]))
+    recorder = EpisodeRecorder(13)
+    model.learn(10**6, callback=recorder)
+    theta, w = np.array([textbook.CORRIDOR_THETA_LEFT, textbook.CORRIDOR_THETA_RIGHT]), 0.0  # rows: 0 left, 1 right
+    # Training stopped at the last step of episode 13, before its update: 12 episodes were trained on
+    for episode in actions[:12]:
+        for t, action in enumerate(episode):
+            delta = -(len(episode) - t) - w  # δ ← G_t − v̂, G_t = −(T − t)
+            w += 2**-6 * delta  # w ← w + α^w δ
+            pi = np.exp(theta - theta.max()) / np.exp(theta - theta.max()).sum()
+            theta = theta + 2**-9 * delta * (np.eye(2)[action] - pi)  # θ ← θ + α^θ δ ∇ln π(A_t|θ)
+    assert sum(len(episode) for episode in actions[:12]) > 200
+    action_net = model.policy.action_net
+    assert isinstance(action_net, th.nn.Linear)
+    np.testing.assert_allclose(action_net.weight.detach().numpy()[:, 0], theta, rtol=0, atol=1e-4)
+    np.testing.assert_allclose(model.policy.predict_values(th.ones(1, 1)).item(), w, rtol=0, atol=1e-3)
