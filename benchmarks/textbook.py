@@ -676,13 +676,30 @@ def plot_10_1(groups: list[SettingRuns], path: Path) -> None:
     plt.close(figure)
 
 
+#: Episodes of the moving average of the per-episode curves (Figs 10.3, 13.1, 13.2): with fewer runs than the book's
+#: 100, the run average alone is too noisy to read
+SMOOTHING = 10
+
+
+def smoothed(values: np.ndarray, window: int = SMOOTHING) -> np.ndarray:
+    """:return: the trailing moving average of ``values`` over ``window`` episodes (fewer at the start)"""
+    sums = np.cumsum(np.insert(values, 0, 0.0))
+    counts = np.minimum(np.arange(1, len(values) + 1), window)
+    return (sums[1:] - sums[np.maximum(np.arange(1, len(values) + 1) - window, 0)]) / counts
+
+
 def plot_10_3(groups: list[SettingRuns], episodes: int, path: Path) -> None:
     figure, axes = plt.subplots(figsize=(6, 4.5))
     for group in groups:
         lengths = group.array("lengths", episodes)
         if len(lengths):
-            axes.plot(np.arange(1, episodes + 1), lengths.mean(axis=0), label=f"{group.setting.label} ({len(lengths)} runs)")
-    axes.set(xlabel="Episode", ylabel="Mountain Car\nSteps per episode\nlog scale", yscale="log", ylim=(100, 1000))
+            axes.plot(
+                np.arange(1, episodes + 1),
+                smoothed(lengths.mean(axis=0)),
+                label=f"{group.setting.label} ({len(lengths)} runs)",
+            )
+    ylabel = f"Mountain Car\nSteps per episode\nlog scale ({SMOOTHING}-episode moving average)"
+    axes.set(xlabel="Episode", ylabel=ylabel, yscale="log", ylim=(100, 1000))
     axes.legend()
     axes.set_title("Fig 10.3: one-step vs 8-step semi-gradient SARSA")
     figure.tight_layout()
@@ -718,12 +735,16 @@ def plot_13(groups: list[SettingRuns], episodes: int, path: Path, title: str) ->
         if len(returns):
             axes.plot(
                 np.arange(1, episodes + 1),
-                returns.mean(axis=0),
+                smoothed(returns.mean(axis=0)),
                 label=f"{group.setting.label} ({len(returns)} runs)",
                 linewidth=0.8,
             )
     axes.axhline(SHORT_CORRIDOR_OPTIMAL_VALUE, linestyle="--", color="gray", label="v*(s0)")
-    axes.set(xlabel="Episode", ylabel="Total reward on episode\n(averaged over runs)", ylim=(-90, -10))
+    axes.set(
+        xlabel="Episode",
+        ylabel=f"Total reward on episode\n(averaged over runs, {SMOOTHING}-episode moving average)",
+        ylim=(-90, -10),
+    )
     axes.legend(fontsize=7)
     axes.set_title(title)
     figure.tight_layout()

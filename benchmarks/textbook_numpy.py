@@ -1,9 +1,10 @@
 """
-NumPy transcriptions of the book's boxes for the short corridor (S&B §13.3 and §13.4, Figs 13.1–13.2), to check
-``benchmarks/textbook.py``'s numbers against the algorithm without the package: the same features (x(s, right) =
-[1, 0], x(s, left) = [0, 1]), the same initial θ = (θ_right, θ_left) = (−1.47, 1.47), γ = 1, per-step updates.
+NumPy transcriptions of the book's boxes, to check ``benchmarks/textbook.py``'s numbers against the algorithms without
+the package: n-step TD on the 19-state random walk (S&B §7.1, Fig 7.2), and REINFORCE on the short corridor (§13.3
+and §13.4, Figs 13.1–13.2) with the same features (x(s, right) = [1, 0], x(s, left) = [0, 1]), the same initial
+θ = (θ_right, θ_left) = (−1.47, 1.47), γ = 1, per-step updates. (Mountain Car's: ``per_step_speed.numpy_tile_sarsa``.)
 
-    python -m benchmarks.textbook_numpy                 # 13.2's two numbers on 2000 and 100 runs (a few minutes)
+    python -m benchmarks.textbook_numpy                 # Fig 7.2's and 13.2's numbers (a few minutes)
     python -m benchmarks.textbook_numpy --clamp         # with the book's code's π ≥ 0.05
 
 The per-run means of REINFORCE with baseline over episodes 1–100 are heavy-tailed (a run now and then has an
@@ -61,12 +62,46 @@ def corridor_reinforce(
     return np.array(returns, dtype=float)
 
 
-def summary(per_run: list[float], runs: int) -> str:
+RANDOM_WALK_TRUE_VALUES = np.arange(-9, 10) / 10
+
+
+def random_walk_td(seed: int, n: int, alpha: float, episodes: int = 10) -> np.ndarray:
+    """
+    The box of §7.2 (n-step TD for estimating V ≈ v_π) on the 19-state random walk of Example 7.1, V = 0 initially.
+
+    :return: the RMS error over the 19 states after each episode
+    """
+    rng = np.random.default_rng(seed)
+    values = np.zeros(21)  # states 0 and 20 are the terminal ones
+    errors = []
+    for _ in range(episodes):
+        states, rewards, big_t, t = [10], [0.0], math.inf, 0
+        while True:
+            if t < big_t:
+                state = states[-1] + (1 if rng.random() < 0.5 else -1)
+                states.append(state)
+                rewards.append(-1.0 if state == 0 else 1.0 if state == 20 else 0.0)
+                if state in (0, 20):
+                    big_t = t + 1
+            tau = t - n + 1
+            if tau >= 0:
+                g = sum(rewards[tau + 1 : int(min(tau + n, big_t)) + 1])  # γ = 1
+                if tau + n < big_t:
+                    g += values[states[tau + n]]
+                values[states[tau]] += alpha * (g - values[states[tau]])
+            if tau == big_t - 1:
+                break
+            t += 1
+        errors.append(math.sqrt(np.mean((values[1:20] - RANDOM_WALK_TRUE_VALUES) ** 2)))
+    return np.array(errors)
+
+
+def summary(per_run: list[float], runs: int, digits: int = 2) -> str:
     values = np.array(per_run)
     se = values.std(ddof=1) / math.sqrt(len(values))
     return (
-        f"{values.mean():.2f} ± {se:.2f} ({len(values)} runs of {runs}), median {np.median(values):.2f}, "
-        f"worst {np.sort(values)[:3].round(1).tolist()}"
+        f"{values.mean():.{digits}f} ± {se:.{digits}f} ({len(values)} runs of {runs}), median {np.median(values):.{digits}f}, "
+        f"extremes {np.sort(values)[[0, -1]].round(digits).tolist()}"
     )
 
 
@@ -75,7 +110,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--clamp", action="store_true", help="keep π ≥ 0.05 as the book's code does")
     parser.add_argument("--baseline-runs", type=int, default=2000)
     parser.add_argument("--plain-runs", type=int, default=100)
+    parser.add_argument("--walk-runs", type=int, default=400)
     args = parser.parse_args(argv)
+    for n, alpha, book in ((4, 0.4, "0.266 ± 0.003"), (16, 0.1, "0.324")):
+        per_run = [float(random_walk_td(k, n, alpha).mean()) for k in range(args.walk_runs)]
+        print(f"n-step TD n={n}, α={alpha}, RMS of episodes 1–10 (book {book}): {summary(per_run, args.walk_runs, 4)}")
     baseline = [corridor_reinforce(k, 100, 2**-9, 2**-6, args.clamp) for k in range(args.baseline_runs)]
     complete = [r[:100].mean() for r in baseline if len(r) >= 100]
     print(f"with baseline α^θ=2^-9, α^w=2^-6, episodes 1–100 (book −20.5 ± 0.7): {summary(complete, len(baseline))}")
