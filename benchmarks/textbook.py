@@ -799,7 +799,11 @@ def settings_table(plan: Plan, figure: str, cache_dir: Path, versions: str) -> s
 FIGURE_NOTES = {
     "7.2": "n-step TD on the 19-state random walk: `NStepSARSA` on `sb3_classic/RandomWalk19-v0` (one action, one-hot "
     "states, so a linear q̂ without bias is the table V), V = 0 initially, γ = 1. The RMS error over the 19 states is "
-    "read from the weights after each episode's updates and averaged over the first 10 episodes.",
+    "read from the weights after each episode's updates and averaged over the first 10 episodes. The box of §7.2 in "
+    "NumPy (`python -m benchmarks.textbook_numpy`, 400 runs) gives 0.264 ± 0.003 at n = 4, α = 0.4 and 0.323 ± 0.002 at "
+    "n = 16, α = 0.1. Every setting sees the same walks for a seed (one action: the walk does not depend on the agent), "
+    "and the walks of the first seeds happen to be hard: seeds 0, 4 and 5 start with 6 exits on the same side (3.5% "
+    "of walks do), which raises every setting's error when there are few runs.",
     "10.1": "The cost-to-go −max_a q̂ of one run of one-step semi-gradient SARSA (α = 0.3/8, the book's code's), after "
     "the episodes shown. Reduced: the book's episode 9000 (about a million more steps) and its step 428 of episode 1 "
     "are left out.",
@@ -813,7 +817,13 @@ FIGURE_NOTES = {
     "to 0 or 1, and the corridor is never left again (seed 0 of α = 2^-13: episode 42 of 933 steps took θ to "
     "(θ_left, θ_right) = (−2.8, 2.8), episode 45 of 2,562 steps to (268, −268); episode 46 never ended). The book's "
     "code keeps π ≥ 0.05, which prevents it; the package does what the pseudocode says.",
-    "13.2": "REINFORCE with baseline (α^θ = 2^-9, α^w = 2^-6) against plain REINFORCE (α = 2^-13).",
+    "13.2": "REINFORCE with baseline (α^θ = 2^-9, α^w = 2^-6) against plain REINFORCE (α = 2^-13). The per-run means "
+    "of REINFORCE with baseline over episodes 1–100 are heavy-tailed: now and then a run has an episode of thousands of "
+    "steps (seed 4: 12,826) and recovers. The box of §13.4 in NumPy (`python -m benchmarks.textbook_numpy`, 2000 runs) "
+    "gives −21.01 ± 0.33, median −18.9, worst run −454.8; the box of §13.3 at α = 2^-13, episodes 401–500, 100 runs: "
+    "−15.12 ± 0.17. The package's runs are that box replayed on their own actions "
+    "(`tests/test_textbook.py::test_corridor_run_is_the_books_box_replayed`): they differ from the NumPy runs by the "
+    "random draws only.",
 }
 
 
