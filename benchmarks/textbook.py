@@ -807,7 +807,10 @@ FIGURE_NOTES = {
     "10.1": "The cost-to-go −max_a q̂ of one run of one-step semi-gradient SARSA (α = 0.3/8, the book's code's), after "
     "the episodes shown. Reduced: the book's episode 9000 (about a million more steps) and its step 428 of episode 1 "
     "are left out.",
-    "10.3": "Steps per episode of one-step (α = 0.5/8) and 8-step (α = 0.3/8) semi-gradient SARSA, averaged over runs.",
+    "10.3": "Steps per episode of one-step (α = 0.5/8) and 8-step (α = 0.3/8) semi-gradient SARSA, averaged over runs. "
+    "The book's ≈ 119 at episodes 91–100 is read from its figure (no standard error). The box of §10.2 in NumPy with the "
+    "same tiles (`benchmarks.per_step_speed.numpy_tile_sarsa`, 30 runs) gives 126.8 ± 5.1 there and 237.1 ± 2.8 over "
+    "episodes 1–50; a run's mean over 10 episodes varies by about ±30 steps, so a few runs cannot pin it down.",
     "10.4": "Mean steps per episode over the first 50 episodes, for each n and α run (error bars: standard errors). The "
     "runs of n = 1, α = 0.5/8 and n = 8, α = 0.3/8 are Fig 10.3's first 50 episodes.",
     "13.1": "Plain REINFORCE (§13.3) on the short corridor, total reward per episode averaged over runs, with v*(s0). "
