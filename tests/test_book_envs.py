@@ -221,3 +221,14 @@ def test_random_walk_is_seeded() -> None:
 def test_random_walk_bad_n_states(n_states: object) -> None:
     with pytest.raises(ValueError, match=f"n_states={n_states!r} must be an odd integer"):
         RandomWalkEnv(n_states)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("env_id", ["sb3_classic/RandomWalk19-v0", "sb3_classic/ShortCorridor-v0"])
+def test_the_algorithms_build_the_envs_by_id(env_id: str) -> None:
+    """SB3 asks for render_mode="rgb_array" first and falls back on a TypeError: the ids work as a string."""
+    from sb3_classic import REINFORCE, NStepSARSA
+
+    for model_class in (NStepSARSA, REINFORCE):
+        model = model_class("MlpPolicy", env_id, seed=0, device="cpu")
+        assert model.get_env() is not None
+        model.learn(50)

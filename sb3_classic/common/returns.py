@@ -73,14 +73,16 @@ def nstep_windows(rewards: np.ndarray, dones: np.ndarray, gamma: float, n_steps:
     """
     length = len(rewards)
     steps = np.arange(length)
-    # Step t + k of the k-th reward of target t (k = 0, …, n − 1), where it has been taken
-    rows = steps[:, None] + np.arange(n_steps)[None, :]
+    # Step t + k of the k-th reward of target t (k = 0, …, n − 1), where it has been taken; no k reaches past the
+    # stored steps (k < length), so a large n costs no more than the steps held
+    n_terms = min(n_steps, length)
+    rows = steps[:, None] + np.arange(n_terms)[None, :]
     taken = rows < length
     rows = np.minimum(rows, length - 1)
     ends = dones[rows] & taken[..., None]  # (t, k, env): the episode ended with step t + k
     # The k-th reward belongs to the target if step t + k was taken and no episode end came before it
     included = taken[..., None] & (np.cumsum(ends, axis=1) - ends == 0)
-    discounts = (gamma ** np.arange(n_steps, dtype=np.float64))[None, :, None]
+    discounts = (gamma ** np.arange(n_terms, dtype=np.float64))[None, :, None]
     # R_{t+1} + γR_{t+2} + … + γ^{K−1}R_{t+K} (eq. 10.4 without its bootstrap term)
     reward_sums = (np.where(included, discounts * rewards[rows], 0.0)).sum(axis=1)
     n_rewards = included.sum(axis=1)  # K ≥ 1: the first reward is always there

@@ -62,7 +62,9 @@ class ShortCorridorEnv(Env[np.ndarray, np.int64]):
 
     def __init__(self, render_mode: str | None = None) -> None:
         if render_mode is not None:
-            raise ValueError(f"render_mode={render_mode!r}: ShortCorridorEnv has no rendering, pass None")
+            # A TypeError, as for an argument the env does not take: SB3's maybe_make_env asks for "rgb_array" and
+            # falls back to gym.make(env_id) on it, so that NStepSARSA("MlpPolicy", env_id) works
+            raise TypeError(f"render_mode={render_mode!r}: ShortCorridorEnv has no rendering, pass None")
         self.observation_space = spaces.Box(0.0, 1.0, shape=(1,), dtype=np.float32)
         self.action_space = spaces.Discrete(2)
         self.state = 0

@@ -1,0 +1,251 @@
+"""
+Speed of the per-step mode against hand-written loops of the same algorithm (issue 12), env steps per second of
+training from scratch, one env, torch 1 thread:
+
+1. ``NStepSARSA`` (per step, tile coding, linear SGD: the book's Figs 10.1–10.4) on Mountain Car against a NumPy
+   transcription of the book's box of §10.2 with the same tiles (``numpy_tile_sarsa``); target ≥ 0.25×;
+2. ``NStepSARSA`` (per step, n = 1, a 2 × 128 MLP, Adam) on CartPole-v1 against a plain PyTorch loop of one-step SARSA
+   with the same network and optimizer (``torch_mlp_sarsa``); target ≥ 1.0×.
+
+    python -m benchmarks.per_step_speed             # prints, and writes benchmarks/results/textbook/per_step_speed.md
+    python -m benchmarks.per_step_speed --steps 20000 --repeats 5
+
+Each repeat times the package and the loop back to back (order alternating) on the same number of env steps; the
+ratio is the package's steps/s over the loop's of the same repeat; the table gives medians and the range of ratios.
+"""
+
+import argparse
+import itertools
+import os
+import platform
+import shlex
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import torch as th
+from torch import nn
+
+import sb3_classic
+from sb3_classic import NStepSARSA, TileCoding
+
+RESULTS = Path(__file__).resolve().parent / "results" / "textbook" / "per_step_speed.md"
+LOW, HIGH = np.array([-1.2, -0.07]), np.array([0.5, 0.07])
+N_TILINGS, TILES = 8, 8
+MOUNTAIN_CAR_N, MOUNTAIN_CAR_ALPHA = 8, 0.3 / 8
+CARTPOLE_NET, CARTPOLE_LR, CARTPOLE_EPS, CARTPOLE_GAMMA = (128, 128), 1e-3, 0.1, 0.99
+
+
+def numpy_tile_sarsa(total_steps: int, seed: int = 0, episode_lengths: list[int] | None = None) -> int:
+    """
+    The book's box of §10.2 (episodic semi-gradient n-step SARSA, ε = 0, greedy ties at random) with the tiles of
+    Example 10.1's footnote (8 tilings of 8 × 8, tiles3's asymmetric offsets, grid from 0), in NumPy.
+
+    :param episode_lengths: if given, the length of every episode that ends is appended to it
+    :return: env steps taken (``total_steps``, or more: the episode running then is finished)
+    """
+    env = gym.make("sb3_classic/MountainCarNoLimit-v0")
+    rng = np.random.default_rng(seed)
+    offsets = np.arange(N_TILINGS)[:, None] * np.array([1, 3])  # tiling t displaced by t·(1, 3)/8 of a tile
+    first = np.floor((np.floor(TILES * LOW / (HIGH - LOW) * N_TILINGS) + offsets) / N_TILINGS)
+    size = TILES + 2  # tiles of one tiling along each dimension, enough for the range from any origin
+    w = np.zeros((3, N_TILINGS * size * size))
+
+    def tiles(s: np.ndarray) -> np.ndarray:
+        q = np.floor(TILES * np.clip(s, LOW, HIGH) / (HIGH - LOW) * N_TILINGS)
+        c = np.floor((q + offsets) / N_TILINGS) - first
+        return np.arange(N_TILINGS) * size * size + (c[:, 0] * size + c[:, 1]).astype(np.int64)
+
+    def greedy(x: np.ndarray) -> int:
+        q = w[:, x].sum(axis=1)
+        return int(rng.choice(np.flatnonzero(q == q.max())))
+
+    n, steps = MOUNTAIN_CAR_N, 0
+    obs, _ = env.reset(seed=seed)
+    while steps < total_steps:
+        xs, actions, rewards = [tiles(obs)], [greedy(tiles(obs))], [0.0]
+        big_t, t = np.inf, 0
+        while True:
+            if t < big_t:
+                obs, reward, terminated, _, _ = env.step(actions[t])
+                steps += 1
+                rewards.append(float(reward))
+                if terminated:
+                    big_t = t + 1
+                else:
+                    xs.append(tiles(obs))
+                    actions.append(greedy(xs[-1]))
+            tau = t - n + 1
+            if tau >= 0:
+                g = sum(rewards[tau + 1 : int(min(tau + n, big_t)) + 1])  # γ = 1
+                if tau + n < big_t:
+                    g += w[actions[tau + n], xs[tau + n]].sum()
+                x, a = xs[tau], actions[tau]
+                w[a, x] += MOUNTAIN_CAR_ALPHA * (g - w[a, x].sum())  # ∇q̂ = x(S_τ, A_τ), binary
+            if tau == big_t - 1:
+                break
+            t += 1
+        if episode_lengths is not None:
+            episode_lengths.append(int(big_t))
+        obs, _ = env.reset()
+    return steps
+
+
+def package_tile_sarsa(total_steps: int, seed: int = 0) -> int:
+    """:return: env steps taken by ``NStepSARSA``'s per-step mode with the same settings as ``numpy_tile_sarsa``"""
+    model = NStepSARSA(
+        "MlpPolicy",
+        gym.make("sb3_classic/MountainCarNoLimit-v0"),
+        learning_rate=MOUNTAIN_CAR_ALPHA,
+        n_steps=MOUNTAIN_CAR_N,
+        train_freq=1,
+        gradient_steps=1,
+        update_mode="per_step",
+        gamma=1.0,
+        exploration_initial_eps=0.0,
+        exploration_final_eps=0.0,
+        policy_kwargs=dict(
+            net_arch=[],
+            with_bias=False,
+            weight_init=0.0,
+            optimizer_class=th.optim.SGD,
+            features_extractor_class=TileCoding,
+            features_extractor_kwargs=dict(n_tilings=8, tiles_per_dim=8, low=(-1.2, -0.07), high=(0.5, 0.07), origin="zero"),
+        ),
+        seed=seed,
+        device="cpu",
+    )
+    model.learn(total_steps)
+    return int(model.num_timesteps)
+
+
+def torch_mlp_sarsa(total_steps: int, seed: int = 0) -> int:
+    """
+    One-step SARSA with a 2 × 128 ReLU MLP and Adam, one update per env step, written as a plain PyTorch loop.
+
+    :return: env steps taken (``total_steps``)
+    """
+    th.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    env = gym.make("CartPole-v1")
+    sizes = (4, *CARTPOLE_NET)
+    layers: list[nn.Module] = []
+    for fan_in, fan_out in itertools.pairwise(sizes):
+        layers += [nn.Linear(fan_in, fan_out), nn.ReLU()]
+    q_net = nn.Sequential(*layers, nn.Linear(sizes[-1], 2))
+    optimizer = th.optim.Adam(q_net.parameters(), lr=CARTPOLE_LR)
+
+    def act(obs: np.ndarray) -> tuple[th.Tensor, int]:
+        x = th.as_tensor(obs, dtype=th.float32)
+        with th.no_grad():
+            q = q_net(x)
+        return x, int(rng.integers(2)) if rng.random() < CARTPOLE_EPS else int(q.argmax())
+
+    obs, _ = env.reset(seed=seed)
+    x, action = act(obs)
+    for _ in range(total_steps):
+        obs, reward, terminated, truncated, _ = env.step(action)
+        next_x, next_action = act(obs)
+        with th.no_grad():
+            target = float(reward) + (0.0 if terminated else CARTPOLE_GAMMA * float(q_net(next_x)[next_action]))
+        loss = 0.5 * (q_net(x)[action] - target) ** 2
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        if terminated or truncated:
+            obs, _ = env.reset()
+            next_x, next_action = act(obs)
+        x, action = next_x, next_action
+    return total_steps
+
+
+def package_mlp_sarsa(total_steps: int, seed: int = 0) -> int:
+    """:return: env steps taken by ``NStepSARSA``'s per-step mode with the settings of ``torch_mlp_sarsa``"""
+    model = NStepSARSA(
+        "MlpPolicy",
+        "CartPole-v1",
+        learning_rate=CARTPOLE_LR,
+        n_steps=1,
+        train_freq=1,
+        gradient_steps=1,
+        update_mode="per_step",
+        gamma=CARTPOLE_GAMMA,
+        exploration_initial_eps=CARTPOLE_EPS,
+        exploration_final_eps=CARTPOLE_EPS,
+        policy_kwargs=dict(net_arch=list(CARTPOLE_NET)),
+        seed=seed,
+        device="cpu",
+    )
+    model.learn(total_steps)
+    return int(model.num_timesteps)
+
+
+def steps_per_second(train: Callable[[int, int], int], steps: int, seed: int) -> float:
+    start = time.perf_counter()
+    taken = train(steps, seed)
+    return taken / (time.perf_counter() - start)
+
+
+COMPARISONS = (
+    ("Mountain Car, tile coding (8 × 8 × 8), linear, SGD, n = 8", package_tile_sarsa, numpy_tile_sarsa, "NumPy loop", 0.25),
+    ("CartPole-v1, 2 × 128 MLP, Adam, n = 1, ε = 0.1", package_mlp_sarsa, torch_mlp_sarsa, "PyTorch loop", 1.0),
+)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--steps", type=int, default=10_000, help="env steps per timed run (default 10,000)")
+    parser.add_argument("--repeats", type=int, default=3, help="timed runs of each (default 3)")
+    parser.add_argument("--output", type=Path, default=RESULTS)
+    args = parser.parse_args(argv)
+    th.set_num_threads(1)
+    load_before = os.getloadavg()[0]
+    rows = []
+    for name, package, loop, loop_name, target in COMPARISONS:
+        package(500, 0), loop(500, 0)  # warm-up: imports, first calls
+        ours: list[float] = []
+        theirs: list[float] = []
+        for repeat in range(args.repeats):
+            pair = [(package, ours), (loop, theirs)]
+            for train, into in pair if repeat % 2 == 0 else pair[::-1]:
+                into.append(steps_per_second(train, args.steps, repeat))
+        ratios = [a / b for a, b in zip(ours, theirs, strict=True)]
+        row = (
+            f"| {name} | {statistics.median(ours):,.0f} | {loop_name}: {statistics.median(theirs):,.0f} "
+            f"| {statistics.median(ratios):.2f}× ({min(ratios):.2f}–{max(ratios):.2f}) | ≥ {target:g}× "
+            f"| {'met' if statistics.median(ratios) >= target else '**not met**'} |"
+        )
+        print(row, flush=True)
+        rows.append(row)
+    load = f"load average {load_before:.1f} before, {os.getloadavg()[0]:.1f} after, on {os.cpu_count()} cores"
+    command = "python -m benchmarks.per_step_speed " + shlex.join(sys.argv[1:] if argv is None else argv)
+    text = f"""# Per-step speed against hand-written loops
+
+Produced by:
+
+```
+{command.strip()}
+```
+
+sb3_classic {sb3_classic.__version__}, torch {th.__version__}, 1 thread, CPU ({platform.machine()}, {load}); {args.steps:,} env
+steps of training from scratch per timed run, {args.repeats} repeats, the package and the loop back to back in each
+(order alternating). Steps/s: medians; ratio: median (min–max) of the package's over the loop's of the same repeat.
+The loops are in `benchmarks/per_step_speed.py`: `numpy_tile_sarsa` is the box of S&B §10.2 with the same tiles,
+`torch_mlp_sarsa` one-step SARSA with the same network and Adam, one update per step.
+
+| Comparison | `NStepSARSA` per step (steps/s) | Loop (steps/s) | Ratio | Target (issue 12) | |
+|---|---|---|---|---|---|
+{chr(10).join(rows)}
+"""
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    args.output.write_text(text)
+    print(f"wrote {args.output}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
