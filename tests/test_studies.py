@@ -347,3 +347,11 @@ def test_a_tiny_study_runs_end_to_end(tmp_path: Path) -> None:
     # Again: everything cached, nothing run
     listed = subprocess.run([*command, "--list"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
     assert "4 runs, 4 cached" in listed.stdout, listed.stdout + listed.stderr
+
+
+def test_the_threshold_defaults_to_gymnasiums(tmp_path: Path) -> None:
+    """An env the harness has no threshold for takes its spec's ``reward_threshold``; one without any must say it."""
+    mountain_car = load_study(write_study(tmp_path, TINY.replace("env: CartPole-v1", "env: MountainCar-v0")))
+    assert mountain_car.threshold == -110.0  # MountainCar-v0's reward_threshold
+    with pytest.raises(StudyError, match="threshold"):
+        load_study(write_study(tmp_path, TINY.replace("env: CartPole-v1", "env: Pendulum-v1"), "pendulum.yml"))

@@ -381,7 +381,9 @@ def load_study(path: Path | str) -> StudySpec:
         if isinstance(overrides.get("policy_kwargs"), Mapping) and isinstance(hyperparams.get("policy_kwargs"), str):
             check.fail(f"{name}.policy_kwargs", "overrides keys of a string: write the base's policy_kwargs as a mapping")
 
-    threshold = data.get("threshold", THRESHOLDS.get(env_id))
+    # The study's own, else the harness's (CartPole-v1, Acrobot-v1), else Gymnasium's reward_threshold of the env
+    default_threshold = THRESHOLDS.get(env_id, env_spec.reward_threshold if env_spec is not None else None)
+    threshold = data.get("threshold", default_threshold)
     if not isinstance(threshold, int | float) or isinstance(threshold, bool):
         check.fail("threshold", f"{threshold!r}: give the return that counts as solved on {env_id}, e.g. threshold: 475")
         threshold = math.nan
