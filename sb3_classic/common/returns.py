@@ -59,7 +59,7 @@ def nstep_windows(rewards: np.ndarray, dones: np.ndarray, gamma: float, n_steps:
     The windows of n-step returns of semi-gradient n-step SARSA (Sutton & Barto §10.2, eq. 10.4): the target of step t
     sums the rewards R_{t+1}, …, R_{t+K} with K = n, or fewer where the episode ends first, and bootstraps after its
     last step (0 after a termination, the final state's value after a time-limit truncation, q̂(S_{t+n}, A_{t+n})
-    otherwise). Vectorised over t, k and envs (one pass of a dozen array operations, whatever n).
+    otherwise). Vectorised over t and envs, a loop over k < min(n, steps held).
 
     A target is complete when the episode ended within its n steps, or when step t+n has been taken (so that
     A_{t+n}, and q̂(S_{t+n}, A_{t+n}), is known). Incomplete targets are never shortened: the caller keeps those
@@ -82,18 +82,24 @@ def nstep_windows(rewards: np.ndarray, dones: np.ndarray, gamma: float, n_steps:
     ends = dones[rows] & taken[..., None]  # (t, k, env): the episode ended with step t + k
     # The k-th reward belongs to the target if step t + k was taken and no episode end came before it
     included = taken[..., None] & (np.cumsum(ends, axis=1) - ends == 0)
-    discounts = (gamma ** np.arange(n_terms, dtype=np.float64))[None, :, None]
-    # R_{t+1} + γR_{t+2} + … + γ^{K−1}R_{t+K} (eq. 10.4 without its bootstrap term)
-    reward_sums = (np.where(included, discounts * rewards[rows], 0.0)).sum(axis=1)
+    # R_{t+1} + γR_{t+2} + … + γ^{K−1}R_{t+K} (eq. 10.4 without its bootstrap term), summed term by term in float32 and
+    # γ^k by repeated products, so that the targets are the same to the last bit whatever the batch (seeded runs repeat)
+    reward_sums = np.zeros(rewards.shape, dtype=np.float32)
+    discount = 1.0  # γ^k
+    after = np.empty(n_terms)  # γ^{k+1}: the bootstrap's discount after k + 1 rewards
+    for k in range(n_terms):
+        reward_sums += np.where(included[:, k], discount * rewards[rows[:, k]], 0.0)
+        after[k] = discount * gamma
+        discount *= gamma
     n_rewards = included.sum(axis=1)  # K ≥ 1: the first reward is always there
     ended = (ends & included).any(axis=1)
     stop_rows = steps[:, None] + n_rewards - 1
     # q̂(S_{t+n}, A_{t+n}) is known once step t+n has been taken; an episode end needs no next step
     complete = ended | ((n_rewards == n_steps) & (stop_rows + 1 < length))
     return NStepWindows(
-        reward_sums=reward_sums.astype(np.float32),
+        reward_sums=reward_sums,
         stop_rows=stop_rows,
-        bootstrap_discounts=(gamma**n_rewards).astype(np.float32),
+        bootstrap_discounts=after[n_rewards - 1].astype(np.float32),
         complete=complete,
     )
 

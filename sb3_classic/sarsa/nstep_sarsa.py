@@ -323,8 +323,12 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             if continuing.any():
                 bootstrap[continuing] = self._next_state_values(data, stop_rows[continuing] + 1, envs[continuing])
             if truncated.any():
-                final_obs = select(data.final_observations, (stop_rows[truncated], envs[truncated]))
-                bootstrap[truncated] = self._bootstrap_values(self.policy.bootstrap_net(obs_as_tensor(final_obs, self.device)))
+                # Every truncation in the buffer in one forward pass, as the rollout stored them (a batch of other rows
+                # could round q̂ differently in the last bit: seeded runs would not repeat)
+                final_obs = obs_as_tensor(select(data.final_observations, data.truncated), self.device)
+                final_values = np.zeros_like(data.rewards)
+                final_values[data.truncated] = self._bootstrap_values(self.policy.bootstrap_net(final_obs))
+                bootstrap[truncated] = final_values[stop_rows[truncated], envs[truncated]]
         targets = windows.reward_sums[rows, envs] + windows.bootstrap_discounts[rows, envs] * bootstrap
         return TrainingBatch(
             observations=obs_as_tensor(select(data.observations, (rows, envs)), self.device),
@@ -345,17 +349,22 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         last_row = len(data.rewards) - 1
         cached_q, cached_updates, cached_timesteps = self._rollout_q_values
         if (
-            self.policy.q_net_target is None
+            self.update_mode == "per_step"
+            and self.policy.q_net_target is None
             and (rows == last_row).all()
             and cached_updates == self._n_updates
             and cached_timesteps + self.n_envs == self.num_timesteps
         ):
             # q̂(S, ·) of the last step's states, computed by the rollout loop with the same weights (no update since):
             # with train_freq=1 this is every bootstrap of the per-step mode, which then needs one forward pass less
+            # (the batch mode always takes the pass below, so that its seeded runs repeat those of earlier versions)
             q_values = cached_q[envs]
         else:
-            observations = obs_as_tensor(select(data.observations, (rows, envs)), self.device)
-            q_values = self.policy.bootstrap_net(observations).cpu().numpy()
+            # q̂ of every stored step in one forward pass, and the rows needed from it: the batch is the same whatever
+            # the targets need, so a seeded run repeats to the last bit
+            n_rows, n_envs = data.rewards.shape
+            observations = obs_as_tensor(select(data.observations, np.ones((n_rows, n_envs), dtype=bool)), self.device)
+            q_values = self.policy.bootstrap_net(observations).cpu().numpy().reshape(n_rows, n_envs, -1)[rows, envs]
         if self.expected_sarsa:
             return epsilon_greedy_expectation(q_values, self.exploration_rate).astype(np.float32)
         return q_values[np.arange(len(rows)), data.actions[rows, envs]].astype(np.float32)
