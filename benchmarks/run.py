@@ -24,14 +24,13 @@ from pathlib import Path
 
 import yaml
 from rich.console import Console
-from rich.markup import escape
 
 from benchmarks.common import DEFAULT_CACHE_DIR, DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR
 from benchmarks.report import load_results, markdown_table, summary_table, threshold_crossings, write_learning_report
 from benchmarks.throughput import ThroughputSettings, run_throughput, throughput_header, write_throughput_report
 from sb3_classic.harness.common import ALL_ALGOS, LABELS, OUR_ALGOS, RunSpec, code_versions, hyperparams_path
-from sb3_classic.harness.pool import report_missing, run_pending
-from sb3_classic.harness.runner import RUN_FILE, ClusterError
+from sb3_classic.harness.pool import report_missing, run_missing_runs
+from sb3_classic.harness.runner import RUN_FILE
 
 
 @dataclass
@@ -214,17 +213,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     specs = make_specs(settings, args.envs, args.algos)
     pending = [spec for spec in specs if not (spec.run_dir(args.cache_dir) / RUN_FILE).exists()]
-    where = f"the Dask cluster at {args.scheduler}" if args.scheduler else f"{args.workers} workers"
-    console.print(f"{len(specs)} runs: {len(specs) - len(pending)} cached, {len(pending)} to run on {where}")
     start = time.perf_counter()
-    try:
-        run_pending(pending, args.workers, args.cache_dir, console, args.scheduler)
-    except KeyboardInterrupt:
-        console.print("Interrupted: the finished runs are cached; run the same command again to resume.")
-        return 130
-    except ClusterError as error:
-        console.print(f"[red]{escape(str(error))}[/red]", highlight=False)
-        return 2
+    status = run_missing_runs(len(specs), pending, args.workers, args.cache_dir, console, args.scheduler)
+    if status is not None:
+        return status
     learning_time = time.perf_counter() - start
 
     results = load_results(specs, args.cache_dir)

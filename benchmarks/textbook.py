@@ -175,7 +175,7 @@ def make_model(setting: Setting, seed: int) -> NStepSARSA | REINFORCE:
         # n-step SARSA of §10.2, one update per step (per_step, train_freq=1), ε = 0 (greedy, ties broken at random)
         return NStepSARSA(
             "MlpPolicy",
-            # gym.make(): passing the id itself makes SB3 ask for render_mode="rgb_array", which RandomWalkEnv refuses
+            # gym.make(): given the id, SB3 first asks for render_mode="rgb_array", which these envs do not offer (a warning)
             gym.make("sb3_classic/RandomWalk19-v0" if random_walk else "sb3_classic/MountainCarNoLimit-v0"),
             learning_rate=setting.alpha,
             n_steps=setting.n,

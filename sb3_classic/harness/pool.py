@@ -161,6 +161,39 @@ def run_pending(
     return failed
 
 
+def run_missing_runs(
+    n_runs: int,
+    pending: Sequence[RunSpec],
+    workers: int,
+    cache_dir: Path,
+    console: Console,
+    scheduler: str | None = None,
+) -> int | None:
+    """
+    ``run_pending`` for a command line: say what is cached and where the rest runs, and turn an interruption or a
+    cluster error into a message and an exit status.
+
+    :param n_runs: how many runs the command has, cached or not
+    :param pending: those not cached yet
+    :param workers: processes of the local pool
+    :param cache_dir: the cache
+    :param console: where to print
+    :param scheduler: a Dask scheduler's address, or None for the local pool
+    :return: None when the runs are done, else the exit status to stop with (130 interrupted, 2 cluster error)
+    """
+    where = f"the Dask cluster at {scheduler}" if scheduler else f"{workers} workers"
+    console.print(f"{n_runs} runs: {n_runs - len(pending)} cached, {len(pending)} to run on {where}")
+    try:
+        run_pending(pending, workers, cache_dir, console, scheduler)
+    except KeyboardInterrupt:
+        console.print("Interrupted: the finished runs are cached; run the same command again to resume.")
+        return 130
+    except ClusterError as error:
+        console.print(f"[red]{escape(str(error))}[/red]", highlight=False)
+        return 2
+    return None
+
+
 def _store(spec: RunSpec, future: "Future[RunResult]", cache_dir: Path) -> str | None:
     """
     Write the finished run of ``future`` into the cache.

@@ -17,8 +17,8 @@ from pathlib import Path
 from rich.console import Console
 from rich.markup import escape
 
-from sb3_classic.harness.pool import report_missing, run_pending
-from sb3_classic.harness.runner import RUN_FILE, ClusterError
+from sb3_classic.harness.pool import report_missing, run_missing_runs
+from sb3_classic.harness.runner import RUN_FILE
 from sb3_classic.studies.outputs import PROGRAM, load_study_results, study_command, write_studies_index, write_study
 from sb3_classic.studies.spec import StudyError, StudySpec, load_study
 
@@ -145,17 +145,10 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
         return 0
 
     if not args.report_only and pending:
-        where = f"the Dask cluster at {args.scheduler}" if args.scheduler else f"{args.workers} workers"
-        console.print(f"{len(runs)} runs: {len(runs) - len(pending)} cached, {len(pending)} to run on {where}")
         start = time.perf_counter()
-        try:
-            run_pending(pending, args.workers, args.cache_dir, console, args.scheduler)
-        except KeyboardInterrupt:
-            console.print("Interrupted: the finished runs are cached; run the same command again to resume.")
-            return 130
-        except ClusterError as error:
-            console.print(f"[red]{escape(str(error))}[/red]", highlight=False)
-            return 2
+        status = run_missing_runs(len(runs), pending, args.workers, args.cache_dir, console, args.scheduler)
+        if status is not None:
+            return status
         console.print(f"Runs: {time.perf_counter() - start:.0f} s")
 
     command_args = sys.argv[1:] if argv is None else list(argv)
