@@ -31,7 +31,8 @@ import torch as th
 from torch import nn
 
 import sb3_classic
-from sb3_classic import NStepSARSA, TileCoding
+from benchmarks.textbook import Setting, make_model
+from sb3_classic import NStepSARSA
 
 RESULTS = Path(__file__).resolve().parent / "results" / "textbook" / "per_step_speed.md"
 LOW, HIGH = np.array([-1.2, -0.07]), np.array([0.5, 0.07])
@@ -97,28 +98,7 @@ def numpy_tile_sarsa(total_steps: int, seed: int = 0, episode_lengths: list[int]
 
 def package_tile_sarsa(total_steps: int, seed: int = 0) -> int:
     """:return: env steps taken by ``NStepSARSA``'s per-step mode with the same settings as ``numpy_tile_sarsa``"""
-    model = NStepSARSA(
-        "MlpPolicy",
-        gym.make("sb3_classic/MountainCarNoLimit-v0"),
-        learning_rate=MOUNTAIN_CAR_ALPHA,
-        n_steps=MOUNTAIN_CAR_N,
-        train_freq=1,
-        gradient_steps=1,
-        update_mode="per_step",
-        gamma=1.0,
-        exploration_initial_eps=0.0,
-        exploration_final_eps=0.0,
-        policy_kwargs=dict(
-            net_arch=[],
-            with_bias=False,
-            weight_init=0.0,
-            optimizer_class=th.optim.SGD,
-            features_extractor_class=TileCoding,
-            features_extractor_kwargs=dict(n_tilings=8, tiles_per_dim=8, low=(-1.2, -0.07), high=(0.5, 0.07), origin="zero"),
-        ),
-        seed=seed,
-        device="cpu",
-    )
+    model = make_model(Setting("mountain_car", MOUNTAIN_CAR_ALPHA, MOUNTAIN_CAR_N), seed)
     model.learn(total_steps)
     return int(model.num_timesteps)
 

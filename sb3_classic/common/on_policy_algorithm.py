@@ -67,6 +67,8 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
     rollout_buffer: TrajectoryBuffer  # type: ignore[assignment]
     policy: BasePolicy  # type: ignore[assignment]
     lr_decay: StepDecay
+    #: ``"batch"`` or ``"per_step"``: how an update applies its transitions (set by each algorithm)
+    update_mode: str
 
     def __init__(
         self,
@@ -207,6 +209,16 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
             learning_rate = schedule(self._current_progress_remaining) * decay
             update_learning_rate(optimizer, learning_rate)
             self.logger.record(key, learning_rate)
+
+    def _update_slices(self, n_transitions: int) -> list[slice]:
+        """
+        :param n_transitions: the transitions of an update, in time order
+        :return: what each gradient step of the update takes: all of them at once (``update_mode="batch"``: one step on
+            their mean), or one at a time in time order (``"per_step"``: the book's updates, each with the full step size)
+        """
+        if self.update_mode == "batch":
+            return [slice(None)]
+        return [slice(index, index + 1) for index in range(n_transitions)]
 
     def _clip_gradients(self, parameters: Any) -> None:
         # None (e.g. passed to load()) means no clipping, as inf does

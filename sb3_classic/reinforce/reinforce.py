@@ -284,16 +284,12 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             return
         returns = batch.targets
 
-        if self.update_mode == "batch":
-            steps = [self._gradient_step(batch.observations, batch.actions, returns, batch.episode_steps)]
-        else:
-            # The book's loop over each episode's steps t = 0, …, T − 1, in the order they were taken (with several
-            # envs, the episodes' steps interleave in time order)
-            steps = []
-            for index in range(len(returns)):
-                one = slice(index, index + 1)
-                observations = select(batch.observations, one)  # type: ignore[arg-type]
-                steps.append(self._gradient_step(observations, batch.actions[one], returns[one], batch.episode_steps[one]))  # type: ignore[arg-type]
+        # Per step: the book's loop over each episode's steps t = 0, …, T − 1, in the order they were taken (with
+        # several envs, the episodes' steps interleave in time order)
+        steps = []
+        for chunk in self._update_slices(len(returns)):
+            observations = select(batch.observations, chunk)  # type: ignore[arg-type]
+            steps.append(self._gradient_step(observations, batch.actions[chunk], returns[chunk], batch.episode_steps[chunk]))  # type: ignore[arg-type]
 
         self.rollout_buffer.mark_trained(batch.trained)
         self._n_updates += len(steps)

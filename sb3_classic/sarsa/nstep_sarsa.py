@@ -266,8 +266,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
 
     def _sample_actions(self, obs: th.Tensor | dict[str, th.Tensor]) -> np.ndarray:
         q_values = self.policy.q_net(obs).cpu().numpy()
-        # Kept for the bootstrap of the next update, if no update comes in between (see _next_state_values)
-        self._rollout_q_values = (q_values, self._n_updates, self.num_timesteps)
+        if self.update_mode == "per_step":
+            # Kept for the bootstrap of the next update, if no update comes in between (see _next_state_values)
+            self._rollout_q_values = (q_values, self._n_updates, self.num_timesteps)
         return self._epsilon_greedy(greedy_random_ties(q_values))
 
     def _rollout_complete(self, n_steps: int, n_episodes: int) -> bool:
@@ -345,7 +346,6 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         :param envs: their envs
         :return: q̂(S, A) of the action taken there (SARSA), or Σ_a π(a|S) q̂(S, a) (Expected SARSA), float32
         """
-        q_values = None
         last_row = len(data.rewards) - 1
         cached_q, cached_updates, cached_timesteps = self._rollout_q_values
         if (
@@ -371,14 +371,14 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
 
     def _gradient_step(
         self, observations: th.Tensor | dict[str, th.Tensor], actions: th.Tensor, targets: th.Tensor
-    ) -> th.Tensor:
+    ) -> tuple[th.Tensor, th.Tensor]:
         """
         One gradient step of q̂ on the mean loss of the given transitions.
 
         :param observations: S_t, a batch of B
         :param actions: A_t as indices, shape (B, 1)
         :param targets: G_{t:t+n}, shape (B,)
-        :return: q̂(S_t, A_t) before the step, shape (B,), detached
+        :return: q̂(S_t, A_t) before the step, shape (B,), and the loss, both detached
         """
         q_predicted = self.policy.q_net(observations).gather(1, actions).flatten()
         # w ← w + α [G_{t:t+n} − q̂(S_t, A_t, w)] ∇q̂(S_t, A_t, w) (S&B eq. 10.5): the gradient of ½(G − q̂)²
@@ -390,8 +390,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         loss.backward()
         self._clip_gradients(self.policy.q_net.parameters())
         self.policy.optimizer.step()
-        self._last_loss = loss.detach()
-        return q_predicted.detach()
+        return q_predicted.detach(), loss.detach()
 
     def train(self) -> None:
         """Update q̂ towards the n-step targets of every transition whose target is known and not trained on yet."""
@@ -403,19 +402,15 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         if batch is None:
             return
 
-        n_transitions = len(batch.targets)
-        q_first: list[th.Tensor] = []
+        # The rows of the batch are time-major: step t of every env, then step t+1
+        chunks = self._update_slices(len(batch.targets))
+        q_first: list[th.Tensor] = []  # q̂(S_t, A_t) before the update's first pass, for the log
         for gradient_step in range(self.gradient_steps):
-            if self.update_mode == "batch":
-                q_predicted = self._gradient_step(batch.observations, batch.actions, batch.targets)
-                q_first += [q_predicted] if gradient_step == 0 else []
-                continue
-            # Each transition's own update, with the full step size α, in time order (the rows of the batch are
-            # time-major: step t of every env, then step t+1)
-            for index in range(n_transitions):
-                one = slice(index, index + 1)
-                q_predicted = self._gradient_step(select(batch.observations, one), batch.actions[one], batch.targets[one])  # type: ignore[arg-type]
-                q_first += [q_predicted] if gradient_step == 0 else []
+            for chunk in chunks:
+                observations = select(batch.observations, chunk)  # type: ignore[arg-type]
+                q_predicted, loss = self._gradient_step(observations, batch.actions[chunk], batch.targets[chunk])  # type: ignore[arg-type]
+                if gradient_step == 0:
+                    q_first.append(q_predicted)
 
         self.rollout_buffer.mark_trained(batch.trained)
         target = self.policy.q_net_target
@@ -423,10 +418,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             # w⁻ ← τ w + (1 − τ) w⁻ (SB3's DQN; not in the book)
             polyak_update(self.policy.q_net.parameters(), target.parameters(), self.tau)
             self._target_updated_at = self.num_timesteps
-        n_steps = self.gradient_steps * (1 if self.update_mode == "batch" else n_transitions)
-        self._n_updates += n_steps
+        self._n_updates += self.gradient_steps * len(chunks)
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
-        self.logger.record("train/loss", self._last_loss.item())
+        self.logger.record("train/loss", loss.item())
         self.logger.record("train/q_mean", th.cat(q_first).mean().item())
         self.logger.record("train/target_mean", batch.targets.mean().item())
         self.logger.record("train/n_transitions", len(batch.targets))
