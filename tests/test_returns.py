@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from reference import bootstrap_values, random_trajectories, reference_mc_returns, reference_nstep_targets
 
-from sb3_classic.common.returns import discounted_returns, epsilon_greedy_expectation, nstep_targets
+from sb3_classic.common.returns import discounted_returns, epsilon_greedy_expectation, nstep_targets, nstep_windows
 
 
 @pytest.mark.parametrize("seed", range(20))
@@ -57,6 +57,27 @@ def test_nstep_targets_by_hand() -> None:
     # The last two need q̂(S_5, A_5): step 5 has not been taken
     assert complete[:, 0].tolist() == [True, True, True, False, False]
     np.testing.assert_allclose(targets[:3, 0], [1 + 0.5 * 2 + 0.25 * 8, 2 + 0.5 * 3, 3])
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_nstep_reward_sums_are_sequential_float32_sums_whatever_the_batch(seed: int) -> None:
+    # Seeded runs repeat to the last bit only if a target's rewards are summed the same way whatever else the buffer
+    # holds: term by term in float32, γ^k by repeated products, as the docstring says
+    rng = np.random.default_rng(seed)
+    n, gamma = int(rng.integers(1, 9)), 0.99
+    rewards = (rng.normal(size=(14, 3)) * 37).astype(np.float32)
+    dones = rng.random((14, 3)) < 0.15
+    windows = nstep_windows(rewards, dones, gamma, n)
+    for t, env in zip(*np.nonzero(windows.complete), strict=True):
+        expected, discount = np.float32(0.0), 1.0
+        for k in range(int(windows.stop_rows[t, env]) - t + 1):
+            expected = np.float32(expected + np.float32(discount) * rewards[t + k, env])
+            discount *= gamma
+        assert windows.reward_sums[t, env].tobytes() == expected.tobytes()
+        # The same window in a buffer that starts at step t (rows before it trained and dropped)
+        later = nstep_windows(rewards[t:], dones[t:], gamma, n)
+        assert later.reward_sums[0, env].tobytes() == expected.tobytes()
+        assert later.bootstrap_discounts[0, env] == windows.bootstrap_discounts[t, env]
 
 
 @pytest.mark.parametrize("epsilon", [0.0, 0.1, 1.0])

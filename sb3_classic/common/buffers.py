@@ -216,12 +216,12 @@ class TrajectoryBuffer(BaseBuffer):
 
         :param trained: boolean mask of shape (pos, n_envs)
         """
-        pending = np.arange(self.pos)[:, None] >= self.start
-        assert not (trained & ~pending).any(), "trained on a transition twice"
-        remaining = pending & ~trained
-        # Each env's remaining transitions must stay a suffix: its first remaining row is its new start
-        self.start = np.where(remaining.any(axis=0), remaining.argmax(axis=0), self.pos)
-        assert (remaining == (np.arange(self.pos)[:, None] >= self.start)).all(), "targets must complete in time order"
+        start = self.start + trained.sum(axis=0)
+        rows = np.arange(self.pos)[:, None]
+        assert (trained == ((rows >= self.start) & (rows < start))).all(), (
+            "trained must be the first pending transitions of each env (each once, in time order)"
+        )
+        self.start = start
         self._drop_rows(int(self.start.min()))
 
     def _drop_rows(self, n_rows: int) -> None:

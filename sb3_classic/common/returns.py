@@ -76,30 +76,33 @@ def nstep_windows(rewards: np.ndarray, dones: np.ndarray, gamma: float, n_steps:
     # Step t + k of the k-th reward of target t (k = 0, …, n − 1), where it has been taken; no k reaches past the
     # stored steps (k < length), so a large n costs no more than the steps held
     n_terms = min(n_steps, length)
-    rows = steps[:, None] + np.arange(n_terms)[None, :]
+    rows = steps[:, None] + np.arange(n_terms)
     taken = rows < length
-    rows = np.minimum(rows, length - 1)
-    ends = dones[rows] & taken[..., None]  # (t, k, env): the episode ended with step t + k
+    np.minimum(rows, length - 1, out=rows)
+    ends = dones[rows]  # (t, k, env): the episode ended with step t + k
+    ends &= taken[..., None]
     # The k-th reward belongs to the target if step t + k was taken and no episode end came before it
-    included = taken[..., None] & (np.cumsum(ends, axis=1) - ends == 0)
-    # R_{t+1} + γR_{t+2} + … + γ^{K−1}R_{t+K} (eq. 10.4 without its bootstrap term), summed term by term in float32 and
-    # γ^k by repeated products, so that the targets are the same to the last bit whatever the batch (seeded runs repeat)
-    reward_sums = np.zeros(rewards.shape, dtype=np.float32)
-    discount = 1.0  # γ^k
-    after = np.empty(n_terms)  # γ^{k+1}: the bootstrap's discount after k + 1 rewards
-    for k in range(n_terms):
-        reward_sums += np.where(included[:, k], discount * rewards[rows[:, k]], 0.0)
-        after[k] = discount * gamma
-        discount *= gamma
+    included = np.empty_like(ends)
+    included[:, 0] = True
+    np.logical_not(np.logical_or.accumulate(ends[:, :-1], axis=1), out=included[:, 1:])
+    included &= taken[..., None]
+    # γ^k by repeated products (k = 0, …, K), and the bootstrap's discount γ^K after K rewards
+    discounts = np.cumprod(np.concatenate(([1.0], np.full(n_terms, gamma))))
+    # R_{t+1} + γR_{t+2} + … + γ^{K−1}R_{t+K} (eq. 10.4 without its bootstrap term), summed term by term in float32 in
+    # the order of k (accumulate is sequential), so that the targets are the same to the last bit whatever the batch
+    terms = rewards[rows] * discounts[:n_terms, None].astype(np.float32)
+    terms[~included] = 0.0
+    reward_sums = np.add.accumulate(terms, axis=1)[:, -1]
     n_rewards = included.sum(axis=1)  # K ≥ 1: the first reward is always there
-    ended = (ends & included).any(axis=1)
     stop_rows = steps[:, None] + n_rewards - 1
+    # The window ended with an episode if its last reward's step ended one
+    ended = np.take_along_axis(ends, n_rewards[:, None] - 1, axis=1)[:, 0]
     # q̂(S_{t+n}, A_{t+n}) is known once step t+n has been taken; an episode end needs no next step
     complete = ended | ((n_rewards == n_steps) & (stop_rows + 1 < length))
     return NStepWindows(
         reward_sums=reward_sums,
         stop_rows=stop_rows,
-        bootstrap_discounts=after[n_rewards - 1].astype(np.float32),
+        bootstrap_discounts=discounts[1:][n_rewards - 1].astype(np.float32),
         complete=complete,
     )
 

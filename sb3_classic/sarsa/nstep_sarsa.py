@@ -320,16 +320,16 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         # target needs one: no bootstrap past a termination, the final state's after a truncation
         continuing = ~data.dones[stop_rows, envs]
         truncated = data.truncated[stop_rows, envs]
-        with th.no_grad():
-            if continuing.any():
-                bootstrap[continuing] = self._next_state_values(data, stop_rows[continuing] + 1, envs[continuing])
-            if truncated.any():
-                # Every truncation in the buffer in one forward pass, as the rollout stored them (a batch of other rows
-                # could round q̂ differently in the last bit: seeded runs would not repeat)
-                final_obs = obs_as_tensor(select(data.final_observations, data.truncated), self.device)
-                final_values = np.zeros_like(data.rewards)
+        if continuing.any():
+            bootstrap[continuing] = self._next_state_values(data, stop_rows[continuing] + 1, envs[continuing])
+        if truncated.any():
+            # Every truncation in the buffer in one forward pass, as the rollout stored them (a batch of other rows
+            # could round q̂ differently in the last bit: seeded runs would not repeat)
+            final_obs = obs_as_tensor(select(data.final_observations, data.truncated), self.device)
+            final_values = np.zeros_like(data.rewards)
+            with th.no_grad():
                 final_values[data.truncated] = self._bootstrap_values(self.policy.bootstrap_net(final_obs))
-                bootstrap[truncated] = final_values[stop_rows[truncated], envs[truncated]]
+            bootstrap[truncated] = final_values[stop_rows[truncated], envs[truncated]]
         targets = windows.reward_sums[rows, envs] + windows.bootstrap_discounts[rows, envs] * bootstrap
         return TrainingBatch(
             observations=obs_as_tensor(select(data.observations, (rows, envs)), self.device),
@@ -364,7 +364,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             # the targets need, so a seeded run repeats to the last bit
             n_rows, n_envs = data.rewards.shape
             observations = obs_as_tensor(select(data.observations, np.ones((n_rows, n_envs), dtype=bool)), self.device)
-            q_values = self.policy.bootstrap_net(observations).cpu().numpy().reshape(n_rows, n_envs, -1)[rows, envs]
+            with th.no_grad():
+                q_values = self.policy.bootstrap_net(observations).cpu().numpy().reshape(n_rows, n_envs, -1)[rows, envs]
         if self.expected_sarsa:
             return epsilon_greedy_expectation(q_values, self.exploration_rate).astype(np.float32)
         return q_values[np.arange(len(rows)), data.actions[rows, envs]].astype(np.float32)
@@ -421,7 +422,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self._n_updates += self.gradient_steps * len(chunks)
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         self.logger.record("train/loss", loss.item())
-        self.logger.record("train/q_mean", th.cat(q_first).mean().item())
+        self.logger.record("train/q_mean", (q_first[0] if len(q_first) == 1 else th.cat(q_first)).mean().item())
         self.logger.record("train/target_mean", batch.targets.mean().item())
         self.logger.record("train/n_transitions", len(batch.targets))
 

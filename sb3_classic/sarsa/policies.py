@@ -181,8 +181,9 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             return
         if not self._mode_dependent:
             # No module behaves differently in the two modes (no dropout, no batch norm): only the flags change, which
-            # saves the per-step loop a walk over every submodule twice per env step
-            self.training = self.q_net.training = mode
+            # saves the per-step loop a walk over every submodule twice per env step. They are plain attributes, set
+            # past nn.Module.__setattr__ (its checks for parameters and submodules cost more than the assignment)
+            self.__dict__["training"] = self.q_net.__dict__["training"] = mode
             return
         self.q_net.set_training_mode(mode)
         self.training = mode
