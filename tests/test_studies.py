@@ -5,6 +5,7 @@ import hashlib
 import inspect
 import io
 import json
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -347,6 +348,13 @@ def test_a_tiny_study_runs_end_to_end(tmp_path: Path) -> None:
     # Again: everything cached, nothing run
     listed = subprocess.run([*command, "--list"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
     assert "4 runs, 4 cached" in listed.stdout, listed.stdout + listed.stderr
+    # The command the outputs show re-runs the study from scratch, also when they were redrawn from the cache: the
+    # file, without the options that change where and how it runs but not its results
+    redrawn = subprocess.run([*command, "--report-only"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
+    assert redrawn.returncode == 0, redrawn.stdout + redrawn.stderr
+    expected = shlex.join(["python", "-m", "benchmarks.studies", str(study_file)])
+    assert json.loads((results / "tiny.json").read_text())["command"] == expected
+    assert f"`{expected}`" in (results / "STUDIES.md").read_text()
 
 
 def test_the_threshold_defaults_to_gymnasiums(tmp_path: Path) -> None:

@@ -7,8 +7,6 @@ where it runs: ``INSTALLED`` (folders in the working directory) or the repositor
 
 import argparse
 import os
-import shlex
-import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -151,18 +149,17 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
             return status
         console.print(f"Runs: {time.perf_counter() - start:.0f} s")
 
-    command_args = sys.argv[1:] if argv is None else list(argv)
+    # The command each study's outputs show re-runs it from scratch: its file and the options that change what is run
+    # (not --workers, --scheduler, the folders or --report-only, which change where and how, not the results)
+    budget = [
+        arg for name in ("seeds", "episodes", "steps") if getattr(args, name) is not None
+        for arg in (f"--{name}", str(getattr(args, name)))
+    ]  # fmt: skip
     missing = []
     for study in studies:
         results = load_study_results(study, args.cache_dir)
         missing += [run.spec for run in results.missing]
-        extra = [arg for arg in command_args if not _is_study_path(arg, args.studies)]
-        command = (
-            study_command(study, extra, defaults.program, defaults.root)
-            if len(studies) > 1
-            else shlex.join(["python", "-m", defaults.program, *command_args])
-        )
-        path = write_study(results, results_dir, command, reduced)
+        path = write_study(results, results_dir, study_command(study, budget, defaults.program, defaults.root), reduced)
         for reading, judged in results.verdicts.items():
             for result in judged:
                 where = "" if len(results.verdicts) == 1 else f" [{reading}]"
@@ -180,10 +177,6 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
     index = write_studies_index(catalogue, results_dir, title, defaults.program, defaults.root)
     console.print(f"wrote {index}", highlight=False)
     return report_missing(missing, console)
-
-
-def _is_study_path(arg: str, studies: Sequence[Path]) -> bool:
-    return any(Path(arg) == path for path in studies)
 
 
 def studies_of(paths: Sequence[Path]) -> list[StudySpec]:
