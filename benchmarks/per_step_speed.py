@@ -3,7 +3,7 @@ Speed of the per-step mode against hand-written loops of the same algorithm (iss
 training from scratch, one env, torch 1 thread:
 
 1. ``NStepSARSA`` (per step, tile coding, linear SGD: the book's Figs 10.1–10.4) on Mountain Car against a NumPy
-   transcription of the book's box of §10.2 with the same tiles (``numpy_tile_sarsa``); target ≥ 0.25×;
+   transcription of the book's box of §10.2 with the same tiles (``textbook_numpy.mountain_car_sarsa``); target ≥ 0.25×;
 2. ``NStepSARSA`` (per step, n = 1, a 2 × 128 MLP, Adam) on CartPole-v1 against a plain PyTorch loop of one-step SARSA
    with the same network and optimizer (``torch_mlp_sarsa``); target ≥ 1.0×.
 
@@ -32,68 +32,21 @@ from torch import nn
 
 import sb3_classic
 from benchmarks.textbook import Setting, make_model
+from benchmarks.textbook_numpy import mountain_car_sarsa
 from sb3_classic import NStepSARSA
 
 RESULTS = Path(__file__).resolve().parent / "results" / "textbook" / "per_step_speed.md"
-LOW, HIGH = np.array([-1.2, -0.07]), np.array([0.5, 0.07])
-N_TILINGS, TILES = 8, 8
 MOUNTAIN_CAR_N, MOUNTAIN_CAR_ALPHA = 8, 0.3 / 8
 CARTPOLE_NET, CARTPOLE_LR, CARTPOLE_EPS, CARTPOLE_GAMMA = (128, 128), 1e-3, 0.1, 0.99
 
 
-def numpy_tile_sarsa(total_steps: int, seed: int = 0, episode_lengths: list[int] | None = None) -> int:
+def numpy_tile_sarsa(total_steps: int, seed: int = 0) -> int:
     """
-    The book's box of §10.2 (episodic semi-gradient n-step SARSA, ε = 0, greedy ties at random) with the tiles of
-    Example 10.1's footnote (8 tilings of 8 × 8, tiles3's asymmetric offsets, grid from 0), in NumPy.
+    The book's box of §10.2 in NumPy with the same tiles and settings (``benchmarks.textbook_numpy.mountain_car_sarsa``).
 
-    :param episode_lengths: if given, the length of every episode that ends is appended to it
     :return: env steps taken (``total_steps``, or more: the episode running then is finished)
     """
-    env = gym.make("sb3_classic/MountainCarNoLimit-v0")
-    rng = np.random.default_rng(seed)
-    offsets = np.arange(N_TILINGS)[:, None] * np.array([1, 3])  # tiling t displaced by t·(1, 3)/8 of a tile
-    first = np.floor((np.floor(TILES * LOW / (HIGH - LOW) * N_TILINGS) + offsets) / N_TILINGS)
-    size = TILES + 2  # tiles of one tiling along each dimension, enough for the range from any origin
-    w = np.zeros((3, N_TILINGS * size * size))
-
-    def tiles(s: np.ndarray) -> np.ndarray:
-        q = np.floor(TILES * np.clip(s, LOW, HIGH) / (HIGH - LOW) * N_TILINGS)
-        c = np.floor((q + offsets) / N_TILINGS) - first
-        return np.arange(N_TILINGS) * size * size + (c[:, 0] * size + c[:, 1]).astype(np.int64)
-
-    def greedy(x: np.ndarray) -> int:
-        q = w[:, x].sum(axis=1)
-        return int(rng.choice(np.flatnonzero(q == q.max())))
-
-    n, steps = MOUNTAIN_CAR_N, 0
-    obs, _ = env.reset(seed=seed)
-    while steps < total_steps:
-        xs, actions, rewards = [tiles(obs)], [greedy(tiles(obs))], [0.0]
-        big_t, t = np.inf, 0
-        while True:
-            if t < big_t:
-                obs, reward, terminated, _, _ = env.step(actions[t])
-                steps += 1
-                rewards.append(float(reward))
-                if terminated:
-                    big_t = t + 1
-                else:
-                    xs.append(tiles(obs))
-                    actions.append(greedy(xs[-1]))
-            tau = t - n + 1
-            if tau >= 0:
-                g = sum(rewards[tau + 1 : int(min(tau + n, big_t)) + 1])  # γ = 1
-                if tau + n < big_t:
-                    g += w[actions[tau + n], xs[tau + n]].sum()
-                x, a = xs[tau], actions[tau]
-                w[a, x] += MOUNTAIN_CAR_ALPHA * (g - w[a, x].sum())  # ∇q̂ = x(S_τ, A_τ), binary
-            if tau == big_t - 1:
-                break
-            t += 1
-        if episode_lengths is not None:
-            episode_lengths.append(int(big_t))
-        obs, _ = env.reset()
-    return steps
+    return sum(mountain_car_sarsa(seed, MOUNTAIN_CAR_N, MOUNTAIN_CAR_ALPHA, total_steps=total_steps))
 
 
 def package_tile_sarsa(total_steps: int, seed: int = 0) -> int:
@@ -214,8 +167,8 @@ Produced by:
 sb3_classic {sb3_classic.__version__}, torch {th.__version__}, 1 thread, CPU ({platform.machine()}, {load}); {args.steps:,} env
 steps of training from scratch per timed run, {args.repeats} repeats, the package and the loop back to back in each
 (order alternating). Steps/s: medians; ratio: median (min–max) of the package's over the loop's of the same repeat.
-The loops are in `benchmarks/per_step_speed.py`: `numpy_tile_sarsa` is the box of S&B §10.2 with the same tiles,
-`torch_mlp_sarsa` one-step SARSA with the same network and Adam, one update per step.
+The loops: `benchmarks/textbook_numpy.py`'s `mountain_car_sarsa` is the box of S&B §10.2 with the same tiles,
+`benchmarks/per_step_speed.py`'s `torch_mlp_sarsa` one-step SARSA with the same network and Adam, one update per step.
 
 | Comparison | `NStepSARSA` per step (steps/s) | Loop (steps/s) | Ratio | Target (issue 12) | |
 |---|---|---|---|---|---|

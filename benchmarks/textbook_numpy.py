@@ -2,9 +2,10 @@
 NumPy transcriptions of the book's boxes, to check ``benchmarks/textbook.py``'s numbers against the algorithms without
 the package: n-step TD on the 19-state random walk (S&B §7.1, Fig 7.2), and REINFORCE on the short corridor (§13.3
 and §13.4, Figs 13.1–13.2) with the same features (x(s, right) = [1, 0], x(s, left) = [0, 1]), the same initial
-θ = (θ_right, θ_left) = (−1.47, 1.47), γ = 1, per-step updates. (Mountain Car's: ``per_step_speed.numpy_tile_sarsa``.)
+θ = (θ_right, θ_left) = (−1.47, 1.47), γ = 1, per-step updates; and episodic semi-gradient n-step SARSA on Mountain
+Car (§10.2, Figs 10.3–10.4) with the tiles of ``benchmarks/textbook.py`` (8 tilings of 8 × 8, tiles3's offsets).
 
-    python -m benchmarks.textbook_numpy                 # Fig 7.2's and 13.2's numbers (a few minutes)
+    python -m benchmarks.textbook_numpy                 # Figs 7.2's, 10.4's and 13.2's numbers (about 15 minutes)
     python -m benchmarks.textbook_numpy --clamp         # with the book's code's π ≥ 0.05
 
 The per-run means of REINFORCE with baseline over episodes 1–100 are heavy-tailed (a run now and then has an
@@ -15,7 +16,10 @@ import argparse
 import math
 import sys
 
+import gymnasium as gym
 import numpy as np
+
+import sb3_classic  # noqa: F401  (registers sb3_classic/MountainCarNoLimit-v0)
 
 
 def corridor_reinforce(
@@ -96,6 +100,74 @@ def random_walk_td(seed: int, n: int, alpha: float, episodes: int = 10) -> np.nd
     return np.array(errors)
 
 
+MOUNTAIN_CAR_LOW, MOUNTAIN_CAR_HIGH = np.array([-1.2, -0.07]), np.array([0.5, 0.07])
+N_TILINGS, TILES = 8, 8
+
+
+def mountain_car_sarsa(
+    seed: int, n: int, alpha: float, episodes: int | None = None, total_steps: int | None = None
+) -> list[int]:
+    """
+    The box of §10.2 (episodic semi-gradient n-step SARSA, ε = 0, greedy ties at random, γ = 1, w = 0 initially) on
+    Mountain Car without its time limit, with the tiles of Example 10.1's footnote (8 tilings of 8 × 8, tiles3's
+    asymmetric offsets, grid from 0; no hashing).
+
+    :param episodes: stop after this many episodes
+    :param total_steps: or stop at the end of the episode running when this many env steps have been taken
+    :return: the length of every episode run
+    """
+    env = gym.make("sb3_classic/MountainCarNoLimit-v0")
+    rng = np.random.default_rng(seed)
+    low, high = MOUNTAIN_CAR_LOW, MOUNTAIN_CAR_HIGH
+    offsets = np.arange(N_TILINGS)[:, None] * np.array([1, 3])  # tiling t displaced by t·(1, 3)/8 of a tile
+    first = np.floor((np.floor(TILES * low / (high - low) * N_TILINGS) + offsets) / N_TILINGS)
+    size = TILES + 2  # tiles of one tiling along each dimension, enough for the range from any origin
+    w = np.zeros((3, N_TILINGS * size * size))
+
+    def tiles(s: np.ndarray) -> np.ndarray:
+        q = np.floor(TILES * np.clip(s, low, high) / (high - low) * N_TILINGS)
+        c = np.floor((q + offsets) / N_TILINGS) - first
+        return np.arange(N_TILINGS) * size * size + (c[:, 0] * size + c[:, 1]).astype(np.int64)
+
+    def greedy(x: np.ndarray) -> int:
+        q = w[:, x].sum(axis=1)
+        return int(rng.choice(np.flatnonzero(q == q.max())))
+
+    lengths: list[int] = []
+    steps = 0
+    obs, _ = env.reset(seed=seed)
+    while (episodes is None or len(lengths) < episodes) and (total_steps is None or steps < total_steps):
+        xs, actions, rewards = [tiles(obs)], [greedy(tiles(obs))], [0.0]
+        big_t, t = math.inf, 0
+        while True:
+            if t < big_t:
+                obs, reward, terminated, _, _ = env.step(actions[t])
+                steps += 1
+                rewards.append(float(reward))
+                if terminated:
+                    big_t = t + 1
+                else:
+                    xs.append(tiles(obs))
+                    actions.append(greedy(xs[-1]))
+            tau = t - n + 1
+            if tau >= 0:
+                g = sum(rewards[tau + 1 : int(min(tau + n, big_t)) + 1])  # γ = 1
+                if tau + n < big_t:
+                    g += w[actions[tau + n], xs[tau + n]].sum()
+                x, a = xs[tau], actions[tau]
+                w[a, x] += alpha * (g - w[a, x].sum())  # ∇q̂ = x(S_τ, A_τ), binary
+            if tau == big_t - 1:
+                break
+            t += 1
+        lengths.append(int(big_t))
+        obs, _ = env.reset()
+    return lengths
+
+
+#: Fig 10.4's settings run by ``main``: n and α × 8 around each n's optimum (the package's grid in textbook.py)
+FIG_10_4_GRID = {1: (0.9, 1.1, 1.3, 1.5), 2: (0.7, 0.9, 1.1), 4: (0.5, 0.7, 0.9), 8: (0.3, 0.4, 0.5), 16: (0.2, 0.3)}
+
+
 def summary(per_run: list[float], runs: int, digits: int = 2) -> str:
     values = np.array(per_run)
     se = values.std(ddof=1) / math.sqrt(len(values))
@@ -111,7 +183,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--baseline-runs", type=int, default=2000)
     parser.add_argument("--plain-runs", type=int, default=100)
     parser.add_argument("--walk-runs", type=int, default=400)
+    parser.add_argument("--mountain-car-runs", type=int, default=30)
     args = parser.parse_args(argv)
+    for n, alphas in FIG_10_4_GRID.items():
+        for alpha8 in alphas:
+            per_run = [
+                float(np.mean(mountain_car_sarsa(k, n, alpha8 / 8, episodes=50))) for k in range(args.mountain_car_runs)
+            ]
+            print(f"n-step SARSA n={n}, α={alpha8}/8, steps per episode 1–50: {summary(per_run, args.mountain_car_runs, 1)}")
     for n, alpha, book in ((4, 0.4, "0.266 ± 0.003"), (16, 0.1, "0.324")):
         per_run = [float(random_walk_td(k, n, alpha).mean()) for k in range(args.walk_runs)]
         print(f"n-step TD n={n}, α={alpha}, RMS of episodes 1–10 (book {book}): {summary(per_run, args.walk_runs, 4)}")

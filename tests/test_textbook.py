@@ -20,8 +20,8 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from benchmarks import textbook
-from benchmarks.per_step_speed import numpy_tile_sarsa
 from benchmarks.textbook import EpisodeRecorder, Run, Setting, make_model, train_run
+from benchmarks.textbook_numpy import mountain_car_sarsa
 from sb3_classic import REINFORCE
 from sb3_classic.envs import RANDOM_WALK_19_TRUE_VALUES
 
@@ -147,7 +147,7 @@ def test_fig_13_2_plain_reinforce_episodes_401_500() -> None:
 def test_mountain_car_n8_episodes_91_100() -> None:
     """
     n = 8, α = 0.3/8, mean steps of episodes 91–100: the book's ≈ 119 (read from Fig 10.3, no standard error; the
-    NumPy transcription of the box in ``benchmarks/per_step_speed.py`` gives the spread of a run's mean); 4 runs here.
+    NumPy transcription of the box in ``benchmarks/textbook_numpy.py`` gives the spread of a run's mean); 4 runs here.
     """
     per_run = [np.mean(train_run(Run(Setting("mountain_car", 0.3 / 8, 8), seed, 100))["lengths"][90:100]) for seed in range(4)]
     ok, message = within(per_run, 119.0, 0.0)
@@ -159,9 +159,7 @@ def test_numpy_transcription_agrees_on_mountain_car() -> None:
     """The NumPy box of §10.2 with the same tiles gives the same curve (episodes 91–100), on its own seeds."""
     means = []
     for seed in range(4):
-        lengths: list[int] = []
-        numpy_tile_sarsa(40_000, seed, lengths)
-        assert len(lengths) >= 100, lengths[:5]
+        lengths = mountain_car_sarsa(seed, 8, 0.3 / 8, episodes=100)
         means.append(float(np.mean(lengths[90:100])))
     ok, message = within(means, 119.0, 0.0)
     assert ok, message
