@@ -15,7 +15,9 @@ What ``register()`` changes in rl-zoo3, and nothing else:
 - ``ExperimentManager.__init__`` defaults ``config`` to this package's YAML for these two algorithms (``-conf``
   still wins);
 - ``ExperimentManager._preprocess_schedules`` also reads ``value_learning_rate`` (REINFORCE's second learning rate)
-  as the zoo reads ``learning_rate``: ``lin_0.01`` for a linear schedule.
+  as the zoo reads ``learning_rate``: ``lin_0.01`` for a linear schedule;
+- the names a YAML's ``policy_kwargs`` string may use (the zoo evaluates it in ``rl_zoo3.exp_manager``'s namespace,
+  which has ``th`` and ``nn``) gain ``TileCoding``, the book's features (``features_extractor_class=TileCoding``).
 """
 
 import functools
@@ -28,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 from torch import nn
 
+from sb3_classic.common.tile_coding import TileCoding
 from sb3_classic.common.torch_layers import WEIGHT_INITS
 from sb3_classic.reinforce import REINFORCE
 from sb3_classic.sarsa import NStepSARSA
@@ -40,6 +43,9 @@ SUPPORTED_RL_ZOO3 = ">=2.9,<3"
 
 #: ``--algo`` names and their classes
 ALGORITHMS: dict[str, type[REINFORCE] | type[NStepSARSA]] = {"reinforce": REINFORCE, "nstep_sarsa": NStepSARSA}
+
+#: Names a YAML's ``policy_kwargs`` string may use besides the zoo's own (``th``, ``nn``, ...)
+YAML_NAMES: dict[str, Any] = {"TileCoding": TileCoding}
 
 # Where the YAMLs are: inside the installed package (the wheel's force-include), else the source tree's hyperparams/
 # (an editable install, or a checkout on sys.path)
@@ -233,11 +239,12 @@ def _dict_attribute(module: ModuleType, name: str, version: str) -> dict[str, An
     return table
 
 
-def _zoo_targets() -> tuple[dict[str, Any], dict[str, Any], dict[str, Any], type]:
+def _zoo_targets() -> tuple[dict[str, Any], dict[str, Any], dict[str, Any], type, dict[str, Any]]:
     """
     Import what ``register()`` patches, checking that it is there and has the expected shape.
 
-    :return: ``ALGOS``, ``HYPERPARAMS_SAMPLER``, ``HYPERPARAMS_CONVERTER``, ``ExperimentManager``
+    :return: ``ALGOS``, ``HYPERPARAMS_SAMPLER``, ``HYPERPARAMS_CONVERTER``, ``ExperimentManager``, and the namespace
+        the zoo evaluates a YAML's ``policy_kwargs`` string in (``rl_zoo3.exp_manager``'s)
     """
     try:
         import rl_zoo3
@@ -262,7 +269,7 @@ def _zoo_targets() -> tuple[dict[str, Any], dict[str, Any], dict[str, Any], type
         raise _incompatible(version, "ExperimentManager.__init__ has no 'algo' and 'config' arguments")
     if not isinstance(inspect.getattr_static(manager, "_preprocess_schedules", None), staticmethod):
         raise _incompatible(version, "ExperimentManager._preprocess_schedules is not a static method")
-    return algos, samplers, converters, manager
+    return algos, samplers, converters, manager, vars(exp_manager)
 
 
 def _patch_default_config(manager: type) -> None:
@@ -306,7 +313,8 @@ def _patch_value_learning_rate(manager: type) -> None:
 def register() -> None:
     """
     Register ``reinforce`` and ``nstep_sarsa`` with rl-zoo3: algorithms, Optuna samplers and converters, default
-    YAMLs. Idempotent; it checks the installed rl-zoo3 first and changes nothing if that lacks any of them.
+    YAMLs, and the names their YAMLs' ``policy_kwargs`` may use (``TileCoding``). Idempotent; it checks the installed
+    rl-zoo3 first and changes nothing if that lacks any of them.
 
     :raises ZooCompatibilityError: (an ``ImportError``) if the installed rl-zoo3 lacks what this patches; the
         message names its version and the supported range
@@ -319,9 +327,12 @@ def register() -> None:
         return
     _registering = True
     try:
-        algos, samplers, converters, manager = _zoo_targets()
+        algos, samplers, converters, manager, yaml_namespace = _zoo_targets()
     finally:
         _registering = False
+    # A name the zoo itself defines there is left alone
+    for name, value in YAML_NAMES.items():
+        yaml_namespace.setdefault(name, value)
     algos.update(ALGORITHMS)
     samplers.update(SAMPLERS)
     converters.update(CONVERTERS)

@@ -36,6 +36,7 @@ from sb3_classic.zoo import (
     CONVERTERS,
     SAMPLERS,
     SUPPORTED_RL_ZOO3,
+    YAML_NAMES,
     ZooCompatibilityError,
     hyperparams_path,
     register,
@@ -125,8 +126,12 @@ def yaml_entry(algo: str, env_id: str) -> dict[str, Any]:
 
 
 def eval_policy_kwargs(policy_kwargs: Any) -> dict[str, Any]:
-    """A YAML's ``policy_kwargs`` as the zoo reads it (a string is evaluated with ``nn`` and ``th`` in scope)."""
-    return eval(policy_kwargs, {"nn": nn, "th": th}) if isinstance(policy_kwargs, str) else dict(policy_kwargs)
+    """
+    A YAML's ``policy_kwargs`` as the zoo reads it: a string is evaluated with ``nn``, ``th`` and the names
+    ``register()`` adds (``TileCoding``) in scope.
+    """
+    namespace = {"nn": nn, "th": th, **YAML_NAMES}
+    return eval(policy_kwargs, namespace) if isinstance(policy_kwargs, str) else dict(policy_kwargs)
 
 
 def learning_rate(model: BaseAlgorithm, optimizer: th.optim.Optimizer | None = None) -> float:
@@ -241,6 +246,11 @@ def test_register_is_idempotent() -> None:
         assert HYPERPARAMS_CONVERTER[algo] is CONVERTERS[algo]
     assert ExperimentManager.__init__ is init
     assert ExperimentManager._preprocess_schedules is preprocess
+    # The names a YAML's policy_kwargs string may use, where the zoo evaluates it
+    import rl_zoo3.exp_manager
+
+    for name, value in YAML_NAMES.items():
+        assert vars(rl_zoo3.exp_manager)[name] is value
     # Each is wrapped once
     patched: Any
     for patched in (init, preprocess):
@@ -345,9 +355,13 @@ def test_search_space(algo: str, sampler: Callable[..., optuna.samplers.BaseSamp
 # --- The zoo's commands --------------------------------------------------------------------------------------------
 
 
-# -i on CartPole only, where 1000 steps end enough episodes for the decays to show
-@pytest.mark.parametrize(("env_id", "continue_with_i"), [("CartPole-v1", True), ("Acrobot-v1", False)])
-@pytest.mark.parametrize("algo", ALGOS)
+# -i on CartPole only, where 1000 steps end enough episodes for the decays to show; MountainCar-v0's entry (SARSA's
+# only: the book's tile coding, named in its policy_kwargs string) is the one whose string needs register()'s names
+@pytest.mark.parametrize(
+    ("algo", "env_id", "continue_with_i"),
+    [(algo, env_id, env_id == "CartPole-v1") for env_id in ENV_IDS for algo in ALGOS]
+    + [("nstep_sarsa", "MountainCar-v0", False)],
+)
 def test_train_with_the_package_yaml(tmp_path: Path, algo: str, env_id: str, continue_with_i: bool) -> None:
     entry = yaml_entry(algo, env_id)
     result = train(tmp_path, algo, env_id, "-n", "1000")
