@@ -33,6 +33,36 @@ VARIANTS = [
         "bootstrap network, Polyak tau 0.05 after every update",
     ),
     Variant(
+        "gamma_0.995",
+        CandidateSARSA,
+        {"gamma": 0.995},
+        "γ = 0.995: a policy that never swings up is worth −200 instead of −100, twice the gap to the goal's values",
+    ),
+    Variant(
+        "gamma_0.995_eps_lin_0.1",
+        CandidateSARSA,
+        {"gamma": 0.995, "exploration_schedule": "linear", "exploration_fraction": 0.1},
+        "γ = 0.995 and the linear ε",
+    ),
+    Variant(
+        "gamma_0.995_eps_0.99",
+        CandidateSARSA,
+        {"gamma": 0.995, "exploration_decay_rate": 0.99},
+        "γ = 0.995 and ε × 0.99 per episode (twice the decay)",
+    ),
+    Variant(
+        "gamma_0.999",
+        CandidateSARSA,
+        {"gamma": 0.999},
+        "γ = 0.999: a policy that never swings up is worth −1000",
+    ),
+    Variant(
+        "gamma_0.995_n5",
+        CandidateSARSA,
+        {"gamma": 0.995, "n_steps": 5},
+        "γ = 0.995 and 5-step returns",
+    ),
+    Variant(
         "eps_lin_0.1",
         CandidateSARSA,
         {"exploration_schedule": "linear", "exploration_fraction": 0.1},
