@@ -91,6 +91,41 @@ def test_window_and_agreement() -> None:
     assert textbook.agreement(0.290, 0.002, 0.266, 0.003).startswith("**no**")
 
 
+def test_fig_10_4_is_checked_at_the_numpy_boxs_best_alpha(tmp_path: Path) -> None:
+    """
+    Fig 10.4's row of each n is at the NumPy box's best α, not at ours (the best of a few runs per α is biased low),
+    and its 2 SE use the box's spread of a run, since 4 runs cannot estimate it.
+    """
+    box_alphas = {alpha8: value for (n, alpha8), value in textbook.FIG_10_4_NUMPY.items() if n == 4}
+    best = min(box_alphas, key=lambda alpha8: box_alphas[alpha8][0])
+    other = max(box_alphas, key=lambda alpha8: box_alphas[alpha8][0])
+    runs = dict.fromkeys(textbook.FIGURES, 0) | {"10.4": 4}
+    plan = textbook.Plan(runs=runs, random_walk_alphas={}, mountain_car_alphas={4: (best, other)})
+
+    def write_runs(alpha8: float, per_run_means: list[float]) -> None:
+        for seed, mean in enumerate(per_run_means):
+            path = textbook.run_path(tmp_path, Run(Setting("mountain_car", alpha8 / 8, 4), seed, 50), "v")
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(json.dumps(dict(episodes=50, capped=False, lengths=[mean] * 50, returns=[-mean] * 50)))
+
+    def fig_10_4_row() -> str:
+        (row,) = [line for line in textbook.book_table(plan, tmp_path, "v")[0].splitlines() if line.startswith("| 10.4")]
+        return row
+
+    box_mean, box_se = box_alphas[best]
+    spread = box_se * math.sqrt(textbook.FIG_10_4_NUMPY_RUNS)
+    # Our runs at the other α happen to be far better: the row stays at the box's best α
+    write_runs(other, [150.0] * 4)
+    # At the box's mean with a tiny spread of their own: 2.5 of the box's SE of a 4-run mean below, which is "no"
+    low = box_mean - 2.5 * spread * math.sqrt(1 / 4 + 1 / textbook.FIG_10_4_NUMPY_RUNS)
+    write_runs(best, [low - 0.01, low + 0.01, low - 0.01, low + 0.01])
+    row = fig_10_4_row()
+    assert f"α={best:g}/8 (the box's best α)" in row
+    assert "**no** (-2.5 SE)" in row
+    write_runs(best, [box_mean - 1, box_mean + 1, box_mean - 1, box_mean + 1])
+    assert "| 4 | yes (+0.0 SE) |" in fig_10_4_row()
+
+
 def test_runs_are_shared_between_figures() -> None:
     """Fig 10.3's runs give Fig 10.4's first 50 episodes; Fig 13.1's α = 2^-13 is Fig 13.2's plain REINFORCE."""
     runs = textbook.plan_runs(textbook.DEFAULT, ["10.3", "10.4", "13.1", "13.2"])
