@@ -145,7 +145,9 @@ def plot_study(results: StudyResults, path: Path) -> Path:
     """
     study = results.study
     readings = list(study.readings)
-    figure, axes = plt.subplots(1, len(readings), figsize=(6.4 * len(readings), 4.2), squeeze=False, sharey=True)
+    figure, axes = plt.subplots(
+        1, len(readings), figsize=(6.4 * len(readings), 4.4), squeeze=False, sharey=True, layout="constrained"
+    )
     for axis, reading in zip(axes[0], readings, strict=True):
         for variant in study.variants:
             returns = results.returns.get((reading, variant))
@@ -161,9 +163,8 @@ def plot_study(results: StudyResults, path: Path) -> Path:
         axis.legend(fontsize=8, loc="best")
         axis.grid(alpha=0.3)
     smooth = f", moving average of {study.smooth} episodes" if study.smooth > 1 else ""
-    axes[0][0].set_ylabel(f"Training return (mean, 95% CI{smooth})")
-    figure.suptitle(f"{study.title}", fontsize=11)
-    figure.tight_layout()
+    axes[0][0].set_ylabel("Training return")
+    figure.suptitle(f"{study.title}\nmean over seeds with its 95% bootstrap band{smooth}", fontsize=10)
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(path, dpi=110)
     plt.close(figure)
