@@ -79,7 +79,8 @@ def test_an_installed_user_runs_a_study_in_their_folder(tmp_path: Path) -> None:
         "my_study.png",
     ]
     assert sorted(path.name for path in work.iterdir()) == ["my_study.yml", "sb3_classic-cache", "studies-results"]
-    assert "python -m sb3_classic.studies my_study.yml --workers 1\n" in (results / "my_study.md").read_text()
+    # The command that re-runs it: the file, without --workers (which changes how, not what, it runs)
+    assert "python -m sb3_classic.studies my_study.yml\n" in (results / "my_study.md").read_text()
     assert "`python -m sb3_classic.studies my_study.yml`" in (results / "STUDIES.md").read_text()
     assert json.loads((results / "my_study.json").read_text())["runs"] == 2
     assert pd.read_csv(results / "my_study.csv")["variant"].tolist() == ["n_steps=1", "n_steps=2"]
