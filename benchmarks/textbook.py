@@ -665,7 +665,7 @@ def book_table(plan: Plan, cache_dir: Path, versions: str) -> tuple[str, list[di
         mean, se, count = at_alpha.window("lengths", 1, 50) if at_alpha and at_alpha.n_runs else (math.nan, math.nan, 0)
         box_mean, box_se = box[alpha8]
         spread = box_se * math.sqrt(FIG_10_4_NUMPY_RUNS)
-        check = agreement(mean, spread / math.sqrt(max(count, 1)), box_mean, box_se) if count else "–"
+        check = agreement(mean, spread / math.sqrt(count), box_mean, box_se) if count else "–"
         lines.append(
             f"| 10.4 | n={n}, α={alpha8:g}/8 (the box's best α) | steps per episode, mean of episodes 1–50 "
             f"| ≈ {low:.0f}–{high:.0f} (figure); the box in NumPy: {fmt(box_mean, box_se, 1)} | {fmt(mean, se, 1)} "

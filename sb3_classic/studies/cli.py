@@ -151,10 +151,10 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
 
     # The command each study's outputs show re-runs it from scratch: its file and the options that change what is run
     # (not --workers, --scheduler, the folders or --report-only, which change where and how, not the results)
-    budget = [
-        arg for name in ("seeds", "episodes", "steps") if getattr(args, name) is not None
-        for arg in (f"--{name}", str(getattr(args, name)))
-    ]  # fmt: skip
+    budget: list[str] = []
+    for name in ("seeds", "episodes", "steps"):
+        if getattr(args, name) is not None:
+            budget += [f"--{name}", str(getattr(args, name))]
     missing = []
     for study in studies:
         results = load_study_results(study, args.cache_dir)
