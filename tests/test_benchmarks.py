@@ -12,6 +12,7 @@ import pytest
 
 from benchmarks import hot_paths
 from benchmarks.common import REPO_ROOT
+from benchmarks.diagnostics.common import Variant, collect
 from benchmarks.report import (
     Results,
     episode_curves,
@@ -356,3 +357,22 @@ def test_episode_curves_share_the_episodes_every_run_completed() -> None:
     # REINFORCE's seeds 1 and 2 completed 6 episodes, but NStepSARSA's only 4
     assert [len(curve) for curve in curves.values()] == [4, 4]
     assert (curves["reinforce"]["count"] == 3).all()
+
+
+def test_diagnostics_label_runs_made_with_an_earlier_yaml_entry(tmp_path: Path) -> None:
+    """A diagnostic variant is a change to the YAML entry: a run cached while the entry was different is not that
+    variant today, and the tables must say what differed rather than pool it with today's runs."""
+
+    variant = Variant("yaml", NStepSARSA, {"n_steps": 4}, "the entry, with n = 4")
+    current = variant.hyperparams("nstep_sarsa", "Acrobot-v1")
+    earlier = {**current, "gamma": 0.5}
+    del earlier["n_steps"]
+    for seed, params in ((0, current), (1, earlier), (2, current)):
+        run_dir = tmp_path / "sarsa" / "Acrobot-v1" / "yaml" / f"seed_{seed}-1000"
+        run_dir.mkdir(parents=True)
+        (run_dir / "run.json").write_text(json.dumps({"hyperparams": params}))
+    found = collect("sarsa", "nstep_sarsa", "Acrobot-v1", [variant], 1000, cache_dir=tmp_path)
+    assert {name: list(runs) for name, runs in found.items()} == {
+        "yaml": [0, 2],
+        "yaml [earlier: gamma=0.5, n_steps=(unset)]": [1],
+    }

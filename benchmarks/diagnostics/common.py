@@ -357,20 +357,32 @@ def parse_seeds(text: str) -> list[int]:
 
 
 def collect(
-    study: str, env_id: str, variants: Sequence[Variant], n_timesteps: int, cache_dir: Path = DIAGNOSTICS_CACHE
+    study: str,
+    algo: str,
+    env_id: str,
+    variants: Sequence[Variant],
+    n_timesteps: int,
+    cache_dir: Path = DIAGNOSTICS_CACHE,
 ) -> dict[str, dict[int, Path]]:
-    """:return: per variant, the cached runs of the study with this budget, by seed"""
+    """
+    :return: per variant, the cached runs of the study with this budget, by seed. A variant is a change to the YAML
+        entry, so runs made while the entry was different are another setting: they are listed under the variant's
+        name followed by the settings that differed then (``yaml [earlier: gamma=0.99]``)
+    """
     found: dict[str, dict[int, Path]] = {}
     for variant in variants:
+        current = variant.hyperparams(algo, env_id)
         folder = cache_dir / study / env_id / variant.name
-        runs = {
-            int(path.name.split("-")[0].removeprefix("seed_")): path
-            for path in sorted(folder.glob(f"seed_*-{n_timesteps}"))
-            if (path / "run.json").exists()
-        }
-        if runs:
-            found[variant.name] = dict(sorted(runs.items()))
-    return found
+        for path in sorted(folder.glob(f"seed_*-{n_timesteps}")):
+            if not (path / "run.json").exists():
+                continue
+            params = json.loads((path / "run.json").read_text())["hyperparams"]
+            changed = sorted(key for key in current.keys() | params.keys() if current.get(key) != params.get(key))
+            name = variant.name
+            if changed:
+                name += " [earlier: " + ", ".join(f"{key}={params.get(key, '(unset)')}" for key in changed) + "]"
+            found.setdefault(name, {})[int(path.name.split("-")[0].removeprefix("seed_"))] = path
+    return {name: dict(sorted(runs.items())) for name, runs in found.items()}
 
 
 def variant_metrics(name: str, runs: dict[int, Path], seeds: Sequence[int] | None = None) -> dict[str, Any]:
@@ -437,5 +449,5 @@ def run_study(
                 f"({time.perf_counter() - start:.0f} s)",
                 flush=True,
             )
-    found = collect(study, env_id, variants, args.steps)
+    found = collect(study, algo, env_id, variants, args.steps)
     print(metrics_table([variant_metrics(name, runs) for name, runs in found.items()]))

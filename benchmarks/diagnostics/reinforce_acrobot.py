@@ -26,6 +26,7 @@ VARIANTS = [
     Variant("vlr_1e-2", RecordedREINFORCE, {"value_learning_rate": 1e-2}, "value learning rate 0.01"),
     Variant("vlr_1e-3", RecordedREINFORCE, {"value_learning_rate": 1e-3}, "value learning rate 0.001"),
     Variant("episodes4", RecordedREINFORCE, {"n_envs": 4, "n_episodes": 4}, "4 envs, 4 episodes per update"),
+    Variant("episodes8", RecordedREINFORCE, {"n_envs": 8, "n_episodes": 8}, "8 envs, 8 episodes per update"),
     Variant(
         "init_kaiming",
         RecordedREINFORCE,
@@ -40,6 +41,18 @@ VARIANTS = [
         RecordedREINFORCE,
         {"normalize_advantage": True, "value_learning_rate": 1e-2},
         "advantages standardised and value learning rate 0.01",
+    ),
+    Variant(
+        "vlr_1e-3_ent_0.01",
+        RecordedREINFORCE,
+        {"value_learning_rate": 1e-3, "ent_coef": 0.01},
+        "value learning rate 0.001 and an entropy bonus",
+    ),
+    Variant(
+        "vlr_1e-3_ent_0.03",
+        RecordedREINFORCE,
+        {"value_learning_rate": 1e-3, "ent_coef": 0.03},
+        "value learning rate 0.001 and a larger entropy bonus",
     ),
     Variant(
         "norm_adv_ent",

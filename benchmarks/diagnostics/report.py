@@ -34,8 +34,8 @@ def seed_scan_table(folder: Path) -> str:
 def main() -> None:
     """Write the two studies' tables."""
     RESULTS_DIR.mkdir(exist_ok=True)
-    for module, study in ((sarsa_acrobot, "sarsa"), (reinforce_acrobot, "reinforce")):
-        found = collect(study, "Acrobot-v1", module.VARIANTS, 200_000)
+    for module, study, algo in ((sarsa_acrobot, "sarsa", "nstep_sarsa"), (reinforce_acrobot, "reinforce", "reinforce")):
+        found = collect(study, algo, "Acrobot-v1", module.VARIANTS, 200_000)
         sections = [
             f"# {study}: Acrobot-v1, 200k steps (written by `python -m benchmarks.diagnostics.report`)",
             metrics_table([variant_metrics(name, runs) for name, runs in found.items()]),

@@ -123,6 +123,32 @@ VARIANTS = [
     Variant("plain_sarsa", CandidateSARSA, {"expected_sarsa": False}, "bootstrap from the action taken"),
     Variant("envs16", CandidateSARSA, {"n_envs": 16}, "16 envs (twice the batch)"),
     Variant(
+        "lr_half_200u",
+        CandidateSARSA,
+        {"learning_rate": 1e-3, "lr_decay_factor": 0.5, "lr_decay_every": 200, "lr_decay_unit": "update"},
+        "lr 1e-3 halved every 200 updates (25.6k steps): below 3e-4 from 51k steps",
+    ),
+    Variant(
+        "lr_lin_half_200u",
+        CandidateSARSA,
+        {"lr_decay_factor": 0.5, "lr_decay_every": 200, "lr_decay_unit": "update"},
+        "lin_1e-3 also halved every 200 updates",
+    ),
+    Variant(
+        "lr_half_200u_eps_0.99",
+        CandidateSARSA,
+        {
+            "learning_rate": 1e-3,
+            "lr_decay_factor": 0.5,
+            "lr_decay_every": 200,
+            "lr_decay_unit": "update",
+            "exploration_decay_rate": 0.99,
+        },
+        "lr 1e-3 halved every 200 updates, ε × 0.99 per episode",
+    ),
+    Variant("huber", CandidateSARSA, {"loss_function": "huber"}, "Huber loss (DQN's)"),
+    Variant("clip_10", CandidateSARSA, {"max_grad_norm": 10.0}, "gradient norm clipped to 10 (DQN's)"),
+    Variant(
         "ln_target_2k",
         CandidateSARSA,
         {"policy_kwargs": NET_LN, "target_update_interval": 2000, "tau": 1.0},
