@@ -19,8 +19,9 @@ import shlex
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import yaml
 from rich.console import Console
@@ -88,15 +89,46 @@ def parse_budgets(values: Sequence[str], env_ids: Sequence[str], defaults: dict[
     return budgets
 
 
-def make_specs(settings: Settings, env_ids: Sequence[str], algos: Sequence[str]) -> list[RunSpec]:
-    """:return: every run of the benchmark, seed by seed (so an interrupted benchmark has whole seeds done)"""
+def parse_overrides(values: Sequence[str], algos: Sequence[str]) -> dict[str, dict[str, Any]]:
+    """
+    :param values: ``ALGO.KEY=VALUE``, each value read as YAML (``10.0`` a float, ``lin_1e-3`` a string)
+    :param algos: the algorithms benchmarked
+    :return: per algorithm, the keys to replace in (or add to) its YAML entries
+    :raises ValueError: naming the ``--set`` value that is malformed or names an algorithm not benchmarked
+    """
+    overrides: dict[str, dict[str, Any]] = {}
+    for value in values:
+        target, equals, text = value.partition("=")
+        algo, dot, key = target.partition(".")
+        if not (equals and dot and algo and key):
+            raise ValueError(f"--set {value!r}: write ALGO.KEY=VALUE, e.g. nstep_sarsa.max_grad_norm=10.0")
+        if algo not in algos:
+            raise ValueError(f"--set {value!r}: {algo!r} is not one of the algorithms benchmarked ({', '.join(algos)})")
+        overrides.setdefault(algo, {})[key] = yaml.safe_load(text)
+    return overrides
+
+
+def make_specs(
+    settings: Settings, env_ids: Sequence[str], algos: Sequence[str], overrides: dict[str, dict[str, Any]] | None = None
+) -> list[RunSpec]:
+    """
+    :param settings: what the benchmark runs
+    :param env_ids: its envs
+    :param algos: its algorithms
+    :param overrides: per algorithm, keys replacing those of its YAML entries (``parse_overrides``)
+    :return: every run of the benchmark, seed by seed (so an interrupted benchmark has whole seeds done)
+    """
     specs = []
     for seed in range(max(settings.seeds, settings.peer_seeds)):
         for env_id in env_ids:
             for algo in algos:
                 if seed < (settings.seeds if algo in OUR_ALGOS else settings.peer_seeds):
                     budget = settings.budgets[env_id]
-                    specs.append(RunSpec.create(algo, env_id, seed, budget, settings.eval_freq, settings.eval_episodes))
+                    spec = RunSpec.create(algo, env_id, seed, budget, settings.eval_freq, settings.eval_episodes)
+                    if overrides and algo in overrides:
+                        changed = yaml.safe_dump({**spec.hyperparams, **overrides[algo]}, sort_keys=True)
+                        spec = replace(spec, hyperparams_yaml=changed)
+                    specs.append(spec)
     return specs
 
 
@@ -158,7 +190,10 @@ def hyperparams_section(specs: Sequence[RunSpec]) -> str:
         f"### {LABELS[algo]} (`{hyperparams_path(algo).name}`)\n\n```yaml\n{yaml.safe_dump(envs, sort_keys=False)}```"
         for algo, envs in entries.items()
     ]
-    note = "The zoo YAML entries, as read when the command started (`n_timesteps` is replaced by the budget above)."
+    note = (
+        "The zoo YAML entries, as read when the command started, with the changes of its `--set` if any (`n_timesteps` "
+        "is replaced by the budget above)."
+    )
     return "## Hyperparameters used\n\n" + note + "\n\n" + "\n\n".join(blocks)
 
 
@@ -189,11 +224,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--cache-dir", type=Path, default=DEFAULT_CACHE_DIR, help="where finished runs are kept")
     parser.add_argument("--results-dir", type=Path, help=f"tables and plots (default {DEFAULT_RESULTS_DIR}; --quick: scratch)")
+    parser.add_argument(
+        "--set",
+        nargs="+",
+        default=[],
+        metavar="ALGO.KEY=VALUE",
+        help="try a change to the YAML entries of an algorithm (e.g. nstep_sarsa.max_grad_norm=10.0) on the benchmark's "
+        "runs; needs --results-dir, so that the committed results stay those of the YAML",
+    )
     parser.add_argument("--skip-throughput", action="store_true", help="only the learning runs and their report")
     parser.add_argument("--throughput-steps", type=int, help="env steps of each timed learn() (default 20,000)")
     parser.add_argument("--throughput-repeats", type=int, help="timed learn() calls per algorithm and setting (default 5)")
     args = parser.parse_args(argv)
 
+    if args.set and args.results_dir is None:
+        parser.error("--set needs --results-dir: the default results are those of the YAML entries as they are")
+    try:
+        overrides = parse_overrides(args.set, args.algos)
+    except ValueError as error:
+        parser.error(str(error))
     base = QUICK if args.quick else FULL
     settings = Settings(
         seeds=base.seeds if args.seeds is None else args.seeds,
@@ -211,7 +260,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = shlex.join(["python", "-m", "benchmarks.run", *(sys.argv[1:] if argv is None else argv)])
     console = Console()
 
-    specs = make_specs(settings, args.envs, args.algos)
+    specs = make_specs(settings, args.envs, args.algos, overrides)
     pending = [spec for spec in specs if not (spec.run_dir(args.cache_dir) / RUN_FILE).exists()]
     start = time.perf_counter()
     status = run_missing_runs(len(specs), pending, args.workers, args.cache_dir, console, args.scheduler)

@@ -23,7 +23,7 @@ from benchmarks.report import (
     summary_table,
     threshold_crossings,
 )
-from benchmarks.run import FULL, QUICK, make_specs, parse_budgets
+from benchmarks.run import FULL, QUICK, main, make_specs, parse_budgets, parse_overrides
 from benchmarks.throughput import measure, throughput_ratios, throughput_table, time_breakdown_table
 from sb3_classic import NStepSARSA
 from sb3_classic.harness import runner
@@ -376,3 +376,36 @@ def test_diagnostics_label_runs_made_with_an_earlier_yaml_entry(tmp_path: Path) 
         "yaml": [0, 2],
         "yaml [earlier: gamma=0.5, n_steps=(unset)]": [1],
     }
+
+
+def test_benchmark_set_changes_only_the_named_algorithms_entries() -> None:
+    overrides = parse_overrides(
+        ["nstep_sarsa.max_grad_norm=10.0", "nstep_sarsa.learning_rate=lin_1e-3"], ["nstep_sarsa", "a2c"]
+    )
+    assert overrides == {"nstep_sarsa": {"max_grad_norm": 10.0, "learning_rate": "lin_1e-3"}}
+    settings = dataclasses.replace(QUICK, seeds=1, peer_seeds=1)
+    plain = make_specs(settings, ["CartPole-v1"], ["nstep_sarsa", "a2c"])
+    changed = make_specs(settings, ["CartPole-v1"], ["nstep_sarsa", "a2c"], overrides)
+    assert changed[0].hyperparams == {**plain[0].hyperparams, **overrides["nstep_sarsa"]}
+    assert changed[0].key() != plain[0].key()
+    assert changed[1] == plain[1]  # A2C's entry untouched
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("max_grad_norm=10", "write ALGO.KEY=VALUE"),
+        ("nstep_sarsa.max_grad_norm", "write ALGO.KEY=VALUE"),
+        ("ppo.ent_coef=0.1", "'ppo' is not one"),
+    ],
+)
+def test_benchmark_set_errors_name_the_value(value: str, message: str) -> None:
+    with pytest.raises(ValueError, match=message) as error:
+        parse_overrides([value], ["nstep_sarsa", "a2c"])
+    assert value in str(error.value)
+
+
+def test_benchmark_set_needs_a_results_dir(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["--set", "nstep_sarsa.max_grad_norm=10.0", "--skip-throughput"])
+    assert "--set needs --results-dir" in capsys.readouterr().err
