@@ -13,6 +13,7 @@ process pool or the Dask cluster, the progress display); this module is the benc
 """
 
 import argparse
+import contextlib
 import os
 import platform
 import shlex
@@ -91,7 +92,7 @@ def parse_budgets(values: Sequence[str], env_ids: Sequence[str], defaults: dict[
 
 def parse_overrides(values: Sequence[str], algos: Sequence[str]) -> dict[str, dict[str, Any]]:
     """
-    :param values: ``ALGO.KEY=VALUE``, each value read as YAML (``10.0`` a float, ``lin_1e-3`` a string)
+    :param values: ``ALGO.KEY=VALUE``, each value read as YAML (``10.0`` and ``5e-4`` floats, ``lin_1e-3`` a string)
     :param algos: the algorithms benchmarked
     :return: per algorithm, the keys to replace in (or add to) its YAML entries
     :raises ValueError: naming the ``--set`` value that is malformed or names an algorithm not benchmarked
@@ -104,7 +105,12 @@ def parse_overrides(values: Sequence[str], algos: Sequence[str]) -> dict[str, di
             raise ValueError(f"--set {value!r}: write ALGO.KEY=VALUE, e.g. nstep_sarsa.max_grad_norm=10.0")
         if algo not in algos:
             raise ValueError(f"--set {value!r}: {algo!r} is not one of the algorithms benchmarked ({', '.join(algos)})")
-        overrides.setdefault(algo, {})[key] = yaml.safe_load(text)
+        parsed = yaml.safe_load(text)
+        if isinstance(parsed, str):
+            # YAML 1.1 reads 5e-4 (no dot) as a string, which the zoo would then take for a schedule name
+            with contextlib.suppress(ValueError):
+                parsed = float(text)
+        overrides.setdefault(algo, {})[key] = parsed
     return overrides
 
 

@@ -380,9 +380,11 @@ def test_diagnostics_label_runs_made_with_an_earlier_yaml_entry(tmp_path: Path) 
 
 def test_benchmark_set_changes_only_the_named_algorithms_entries() -> None:
     overrides = parse_overrides(
-        ["nstep_sarsa.max_grad_norm=10.0", "nstep_sarsa.learning_rate=lin_1e-3"], ["nstep_sarsa", "a2c"]
+        ["nstep_sarsa.max_grad_norm=10.0", "nstep_sarsa.learning_rate=lin_1e-3", "nstep_sarsa.tau=5e-3"],
+        ["nstep_sarsa", "a2c"],
     )
-    assert overrides == {"nstep_sarsa": {"max_grad_norm": 10.0, "learning_rate": "lin_1e-3"}}
+    # 5e-3 is a string to YAML 1.1, which the zoo would take for a schedule's name
+    assert overrides == {"nstep_sarsa": {"max_grad_norm": 10.0, "learning_rate": "lin_1e-3", "tau": 5e-3}}
     settings = dataclasses.replace(QUICK, seeds=1, peer_seeds=1)
     plain = make_specs(settings, ["CartPole-v1"], ["nstep_sarsa", "a2c"])
     changed = make_specs(settings, ["CartPole-v1"], ["nstep_sarsa", "a2c"], overrides)
