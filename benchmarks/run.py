@@ -236,7 +236,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=[],
         metavar="ALGO.KEY=VALUE",
         help="try a change to the YAML entries of an algorithm (e.g. nstep_sarsa.max_grad_norm=10.0) on the benchmark's "
-        "runs; needs --results-dir, so that the committed results stay those of the YAML",
+        "learning runs (not the throughput's); needs --results-dir, so that the committed results stay those of the YAML",
     )
     parser.add_argument("--skip-throughput", action="store_true", help="only the learning runs and their report")
     parser.add_argument("--throughput-steps", type=int, help="env steps of each timed learn() (default 20,000)")
