@@ -134,18 +134,6 @@ VARIANTS = [
         {"lr_decay_factor": 0.5, "lr_decay_every": 200, "lr_decay_unit": "update"},
         "lin_1e-3 also halved every 200 updates",
     ),
-    Variant(
-        "lr_half_200u_eps_0.99",
-        CandidateSARSA,
-        {
-            "learning_rate": 1e-3,
-            "lr_decay_factor": 0.5,
-            "lr_decay_every": 200,
-            "lr_decay_unit": "update",
-            "exploration_decay_rate": 0.99,
-        },
-        "lr 1e-3 halved every 200 updates, ε × 0.99 per episode",
-    ),
     Variant("huber", CandidateSARSA, {"loss_function": "huber"}, "Huber loss (DQN's)"),
     Variant("clip_10", CandidateSARSA, {"max_grad_norm": 10.0}, "gradient norm clipped to 10 (DQN's)"),
     Variant(
