@@ -4,7 +4,14 @@ import numpy as np
 import pytest
 from reference import bootstrap_values, random_trajectories, reference_mc_returns, reference_nstep_targets
 
-from sb3_classic.common.returns import discounted_returns, epsilon_greedy_expectation, nstep_targets, nstep_windows
+from sb3_classic.common.returns import (
+    discounted_returns,
+    epsilon_greedy_expectation,
+    gamma_powers,
+    nstep_targets,
+    nstep_window,
+    nstep_windows,
+)
 
 
 @pytest.mark.parametrize("seed", range(20))
@@ -78,6 +85,24 @@ def test_nstep_reward_sums_are_sequential_float32_sums_whatever_the_batch(seed: 
         later = nstep_windows(rewards[t:], dones[t:], gamma, n)
         assert later.reward_sums[0, env].tobytes() == expected.tobytes()
         assert later.bootstrap_discounts[0, env] == windows.bootstrap_discounts[t, env]
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_one_window_is_the_vectorised_window_to_the_last_bit(seed: int) -> None:
+    # The per-step mode with one env computes its windows one at a time (nstep_window); a seeded run must give the same
+    # parameters as with nstep_windows, so every field must be the same bits, complete or not
+    rng = np.random.default_rng(seed)
+    n, gamma = int(rng.choice([1, 2, 5, 30])), float(rng.choice([0.9, 0.99, 1.0]))
+    length = int(rng.integers(1, 20))
+    rewards = (rng.normal(size=(length, 1)) * 37).astype(np.float32)
+    dones = rng.random((length, 1)) < float(rng.choice([0.0, 0.15, 0.5]))
+    windows = nstep_windows(rewards, dones, gamma, n)
+    for t in range(length):
+        window = nstep_window(rewards[:, 0], dones[:, 0], t, gamma_powers(gamma, n), n)
+        assert window.complete == windows.complete[t, 0]
+        assert window.stop_row == windows.stop_rows[t, 0]
+        assert window.reward_sum.tobytes() == windows.reward_sums[t, 0].tobytes()
+        assert window.bootstrap_discount.tobytes() == windows.bootstrap_discounts[t, 0].tobytes()
 
 
 @pytest.mark.parametrize("epsilon", [0.0, 0.1, 1.0])

@@ -216,7 +216,7 @@ class TrajectoryBuffer(BaseBuffer):
 
         :param trained: boolean mask of shape (pos, n_envs)
         """
-        start = self.start + trained.sum(axis=0)
+        start = self.start + np.count_nonzero(trained, axis=0)
         rows = np.arange(self.pos)[:, None]
         assert (trained == ((rows >= self.start) & (rows < start))).all(), (
             "trained must be the first pending transitions of each env (each once, in time order)"

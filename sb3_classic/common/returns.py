@@ -12,6 +12,7 @@ Every array is indexed ``[t, env]`` over the steps a buffer holds, in the order 
 An entry whose return depends on steps not taken yet is flagged incomplete; its value is meaningless.
 """
 
+import functools
 from typing import NamedTuple
 
 import numpy as np
@@ -87,10 +88,10 @@ def nstep_windows(rewards: np.ndarray, dones: np.ndarray, gamma: float, n_steps:
     np.logical_not(np.logical_or.accumulate(ends[:, :-1], axis=1), out=included[:, 1:])
     included &= taken[..., None]
     # γ^k by repeated products (k = 0, …, K), and the bootstrap's discount γ^K after K rewards
-    discounts = np.cumprod(np.concatenate(([1.0], np.full(n_terms, gamma))))
+    discounts = gamma_powers(gamma, n_terms)
     # R_{t+1} + γR_{t+2} + … + γ^{K−1}R_{t+K} (eq. 10.4 without its bootstrap term), summed term by term in float32 in
     # the order of k (accumulate is sequential), so that the targets are the same to the last bit whatever the batch
-    terms = rewards[rows] * discounts[:n_terms, None].astype(np.float32)
+    terms = rewards[rows] * discounts[:n_terms, None]
     terms[~included] = 0.0
     reward_sums = np.add.accumulate(terms, axis=1)[:, -1]
     n_rewards = included.sum(axis=1)  # K ≥ 1: the first reward is always there
@@ -102,9 +103,58 @@ def nstep_windows(rewards: np.ndarray, dones: np.ndarray, gamma: float, n_steps:
     return NStepWindows(
         reward_sums=reward_sums,
         stop_rows=stop_rows,
-        bootstrap_discounts=discounts[1:][n_rewards - 1].astype(np.float32),
+        bootstrap_discounts=discounts[n_rewards],
         complete=complete,
     )
+
+
+class NStepWindow(NamedTuple):
+    """The n-step window of one transition: ``NStepWindows`` at one ``[t, env]``."""
+
+    reward_sum: np.float32  #: R_{t+1} + γR_{t+2} + … over the window's rewards
+    stop_row: int  #: the step whose reward is the window's last
+    bootstrap_discount: np.float32  #: γ^K for a window of K rewards
+    complete: bool  #: whether the target is known
+
+
+@functools.lru_cache(maxsize=64)
+def gamma_powers(gamma: float, n_steps: int) -> np.ndarray:
+    """
+    :param gamma: discount factor γ
+    :param n_steps: the highest power n
+    :return: γ^0, …, γ^n by repeated products in float64, as float32, shape (n + 1,), read-only (cached)
+    """
+    powers = np.cumprod(np.concatenate(([1.0], np.full(n_steps, gamma)))).astype(np.float32)
+    powers.setflags(write=False)
+    return powers
+
+
+def nstep_window(rewards: np.ndarray, dones: np.ndarray, t: int, discounts: np.ndarray, n_steps: int) -> NStepWindow:
+    """
+    The window of one transition of one env, to the last bit what ``nstep_windows`` gives at ``[t, env]`` (S&B
+    eq. 10.4, the same float32 sums in the same order), at a cost that grows with n instead of n × the steps held: the
+    per-step mode with one env trains one or a few transitions per env step, for which the ~30 NumPy calls of
+    ``nstep_windows`` over the n + 1 steps held cost more than the gradient step's Python overhead with a small n,
+    and more than the gradient step itself with a large one (n = 512: 512 × 512 entries per env step).
+
+    :param rewards: R_{t+1} of one env, shape (n_steps_stored,), float32
+    :param dones: whether the episode ended with step t, shape (n_steps_stored,)
+    :param t: the transition's step
+    :param discounts: ``gamma_powers(gamma, n_steps)``
+    :param n_steps: the n of n-step returns, n ≥ 1
+    :return: the window (see ``NStepWindow``)
+    """
+    window_dones = dones[t : t + n_steps]
+    # K rewards: up to the first episode end in the window, else as many of the n as have been taken
+    ends = np.flatnonzero(window_dones)
+    ended = len(ends) > 0
+    n_rewards = int(ends[0]) + 1 if ended else len(window_dones)
+    # R_{t+1} + γR_{t+2} + … + γ^{K−1}R_{t+K}: float32 terms summed in order (accumulate is sequential)
+    reward_sum = np.add.accumulate(rewards[t : t + n_rewards] * discounts[:n_rewards])[-1]
+    stop_row = t + n_rewards - 1
+    # q̂(S_{t+n}, A_{t+n}) is known once step t+n has been taken; an episode end needs no next step
+    complete = ended or (n_rewards == n_steps and stop_row + 1 < len(rewards))
+    return NStepWindow(reward_sum, stop_row, discounts[n_rewards], complete)
 
 
 def nstep_targets(

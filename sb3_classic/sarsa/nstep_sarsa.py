@@ -11,7 +11,13 @@ from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor, polyak
 
 from sb3_classic.common.buffers import TrainingBatch, TrajectorySamples, select
 from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
-from sb3_classic.common.returns import epsilon_greedy_expectation, greedy_random_ties, nstep_windows
+from sb3_classic.common.returns import (
+    epsilon_greedy_expectation,
+    gamma_powers,
+    greedy_random_ties,
+    nstep_window,
+    nstep_windows,
+)
 from sb3_classic.common.schedules import ExponentialDecay
 from sb3_classic.common.utils import check_choice, check_positive_int, check_range
 from sb3_classic.sarsa.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, SARSAPolicy
@@ -309,12 +315,35 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         """
         data = self.rollout_buffer.get()
         # G_{t:t+n} (S&B eq. 10.4) = the window's rewards + γ^K × its bootstrap value
-        windows = nstep_windows(data.rewards, data.dones, self.gamma, self.n_steps)
-        trained = windows.complete & data.pending
-        if not trained.any():
-            return None
-        rows, envs = np.nonzero(trained)  # row-major: time order
-        stop_rows = windows.stop_rows[rows, envs]
+        if self.n_envs == 1 and self.train_freq == 1:
+            # The book's loop (one env, an update every step): one or a few windows per update, each computed alone
+            # (nstep_window: the same bits as nstep_windows, without its cost of n × the steps held per update)
+            start = int(self.rollout_buffer.start[0])
+            windows = []
+            discounts = gamma_powers(self.gamma, self.n_steps)
+            for t in range(start, len(data.rewards)):
+                window = nstep_window(data.rewards[:, 0], data.dones[:, 0], t, discounts, self.n_steps)
+                if not window.complete:
+                    break  # and so are the later ones: the complete targets are a prefix of the pending transitions
+                windows.append(window)
+            if not windows:
+                return None
+            rows = np.arange(start, start + len(windows))
+            envs = np.zeros(len(windows), dtype=np.int64)
+            trained = np.zeros(data.rewards.shape, dtype=bool)
+            trained[rows, 0] = True
+            stop_rows = np.array([window.stop_row for window in windows])
+            reward_sums = np.array([window.reward_sum for window in windows], dtype=np.float32)
+            bootstrap_discounts = np.array([window.bootstrap_discount for window in windows], dtype=np.float32)
+        else:
+            all_windows = nstep_windows(data.rewards, data.dones, self.gamma, self.n_steps)
+            trained = all_windows.complete & data.pending
+            if not trained.any():
+                return None
+            rows, envs = np.nonzero(trained)  # row-major: time order
+            stop_rows = all_windows.stop_rows[rows, envs]
+            reward_sums = all_windows.reward_sums[rows, envs]
+            bootstrap_discounts = all_windows.bootstrap_discounts[rows, envs]
         bootstrap = np.zeros(len(rows), dtype=np.float32)
         # Semi-gradient: the bootstrap values come from the current weights, without gradient, and only where a
         # target needs one: no bootstrap past a termination, the final state's after a truncation
@@ -330,7 +359,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             with th.no_grad():
                 final_values[data.truncated] = self._bootstrap_values(self.policy.bootstrap_net(final_obs))
             bootstrap[truncated] = final_values[stop_rows[truncated], envs[truncated]]
-        targets = windows.reward_sums[rows, envs] + windows.bootstrap_discounts[rows, envs] * bootstrap
+        targets = reward_sums + bootstrap_discounts * bootstrap
         return TrainingBatch(
             observations=obs_as_tensor(select(data.observations, (rows, envs)), self.device),
             actions=th.as_tensor(data.actions[rows, envs].reshape(-1, 1), device=self.device),
@@ -408,8 +437,12 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         q_first: list[th.Tensor] = []  # q̂(S_t, A_t) before the update's first pass, for the log
         for gradient_step in range(self.gradient_steps):
             for chunk in chunks:
-                observations = select(batch.observations, chunk)  # type: ignore[arg-type]
-                q_predicted, loss = self._gradient_step(observations, batch.actions[chunk], batch.targets[chunk])  # type: ignore[arg-type]
+                if len(chunks) == 1:
+                    # The whole batch, not sliced (3 tensor slices: ~4 µs, which the per-step mode pays every env step)
+                    q_predicted, loss = self._gradient_step(batch.observations, batch.actions, batch.targets)
+                else:
+                    observations = select(batch.observations, chunk)  # type: ignore[arg-type]
+                    q_predicted, loss = self._gradient_step(observations, batch.actions[chunk], batch.targets[chunk])  # type: ignore[arg-type]
                 if gradient_step == 0:
                     q_first.append(q_predicted)
 
@@ -421,9 +454,13 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             self._target_updated_at = self.num_timesteps
         self._n_updates += self.gradient_steps * len(chunks)
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
-        self.logger.record("train/loss", loss.item())
-        self.logger.record("train/q_mean", (q_first[0] if len(q_first) == 1 else th.cat(q_first)).mean().item())
-        self.logger.record("train/target_mean", batch.targets.mean().item())
+        q_mean = (q_first[0] if len(q_first) == 1 else th.cat(q_first)).mean()
+        # One conversion of the three (each .item() costs as much as a small tensor op, and this runs every env step
+        # in the per-step mode)
+        loss_value, q_mean_value, target_mean = th.stack((loss, q_mean, batch.targets.mean())).tolist()
+        self.logger.record("train/loss", loss_value)
+        self.logger.record("train/q_mean", q_mean_value)
+        self.logger.record("train/target_mean", target_mean)
         self.logger.record("train/n_transitions", len(batch.targets))
 
     def _excluded_save_params(self) -> list[str]:
