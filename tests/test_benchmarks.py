@@ -249,8 +249,8 @@ def test_throughput_ratios_pair_each_repeat() -> None:
     assert ratios.loc["nstep_sarsa", "ratio"] == pytest.approx(1.1)
     table = throughput_table(pd.DataFrame(rows))
     assert table.loc[0, "REINFORCE / A2C"] == "3.50× (3.00–4.00)"
-    assert table.loc[0, "REINFORCE ≥ 1.5×"] == "yes"
-    assert table.loc[0, "NStepSARSA ≥ 1.5×"] == "no"
+    assert table.loc[0, "REINFORCE ≥ 2×"] == "yes"
+    assert table.loc[0, "NStepSARSA ≥ 2×"] == "no"
 
 
 def test_time_breakdown_is_per_10k_steps_and_the_rest_is_what_env_and_train_leave() -> None:
