@@ -307,7 +307,7 @@ INVALID_ARGUMENTS = [
     (REINFORCE, dict(lr_decay_every=10, lr_decay_milestones=[100]), "not both"),
     (REINFORCE, dict(lr_decay_unit="epoch"), "lr_decay_unit='epoch' must be one of 'episode', 'update'"),
     (REINFORCE, dict(max_grad_norm=0.0), "max_grad_norm=0.0 must be > 0, or None"),
-    (REINFORCE, dict(policy_kwargs=dict(weight_init="he")), "weight_init='he' must be one of"),
+    (REINFORCE, dict(policy_kwargs=dict(weight_init="he")), "weight_init='he' must be one of .*'kaiming' is He"),
     (NStepSARSA, dict(n_steps=0), "n_steps=0 must be an integer >= 1"),
     (NStepSARSA, dict(n_steps=2.5), "n_steps=2.5 must be an integer >= 1"),
     (NStepSARSA, dict(exploration_initial_eps=1.5), r"exploration_initial_eps=1.5 must be a number in \[0.0, 1.0\]"),
@@ -317,6 +317,7 @@ INVALID_ARGUMENTS = [
     (NStepSARSA, dict(learning_rate=0.0), "learning_rate=0.0 must be > 0"),
     (NStepSARSA, dict(gamma=-0.1), "gamma=-0.1"),
     (NStepSARSA, dict(train_freq=0), "train_freq=0"),
+    (NStepSARSA, dict(train_freq=(4, "step")), r"train_freq=\(4, 'step'\) must be an integer >= 1.*tuple form"),
     (NStepSARSA, dict(loss_function="l1"), "loss_function='l1' must be one of 'mse', 'huber'"),
     (NStepSARSA, dict(lr_decay_milestones=[300, -5]), r"lr_decay_milestones\[...\]=-5"),
 ]

@@ -69,7 +69,12 @@ def check_weight_init(weight_init: str | float) -> None:
         if not math.isfinite(weight_init):
             raise ValueError(f"weight_init={weight_init!r} must be finite (0.0 is the book's start for linear methods)")
         return
-    check_choice("weight_init", weight_init, WEIGHT_INITS)
+    check_choice(
+        "weight_init",
+        weight_init,
+        WEIGHT_INITS,
+        hint="'kaiming' is He initialisation; a number (e.g. 0.0, the book's start for linear methods) sets all weights to it",
+    )
 
 
 def constant_init(modules: Iterable[nn.Module], value: float) -> None:

@@ -45,11 +45,12 @@ def check_positive_int(name: str, value: Any, hint: str = "") -> None:
         raise ValueError(f"{name}={value!r} must be an integer >= 1{'. ' + hint if hint else ''}")
 
 
-def check_choice(name: str, value: Any, choices: Sequence[str]) -> None:
+def check_choice(name: str, value: Any, choices: Sequence[str], hint: str = "") -> None:
     """
     :param name: the argument's name
     :param value: the value to check
     :param choices: allowed values
+    :param hint: what else is accepted, or what a common wrong value means, appended to the message
     """
     if value not in choices:
-        raise ValueError(f"{name}={value!r} must be one of {', '.join(map(repr, choices))}")
+        raise ValueError(f"{name}={value!r} must be one of {', '.join(map(repr, choices))}{'. ' + hint if hint else ''}")

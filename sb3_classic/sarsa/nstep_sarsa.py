@@ -212,7 +212,11 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     def _check_arguments(self) -> None:
         super()._check_arguments()
         check_positive_int("n_steps", self.n_steps, hint="n=1 is one-step SARSA; the seed report used 5 and 10")
-        check_positive_int("train_freq", self.train_freq)
+        check_positive_int(
+            "train_freq",
+            self.train_freq,
+            hint="It counts env steps per env; SB3's tuple form (4, 'step') is not supported, and there is no 'episode' unit",
+        )
         check_positive_int("gradient_steps", self.gradient_steps)
         check_choice("update_mode", self.update_mode, ("batch", "per_step"))
         check_choice("exploration_schedule", self.exploration_schedule, ("exponential", "linear"))
