@@ -38,3 +38,13 @@ def test_quick_start_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> No
     exec(compile(code, "README.md quick start", "exec"), namespace)
     assert (tmp_path / "sarsa_cartpole.zip").is_file()
     assert namespace["action"] is not None
+
+
+def test_book_figure_example_prints_the_books_number(capsys: pytest.CaptureFixture[str]) -> None:
+    # The README's Fig 13.2 example as written (the whole run, ~10 s): plain REINFORCE per step on the short corridor,
+    # episodes 401-500; the book gives -15.1 +- 0.2 over 100 runs, and the README says what this seed prints
+    (example,) = re.findall(r"A figure's point with the public API alone.*?```python\n(.*?)```", README, flags=re.DOTALL)
+    exec(compile(example, "README.md Fig 13.2 example", "exec"), {})
+    printed = float(capsys.readouterr().out.strip().splitlines()[-1])
+    assert -17.0 < printed < -13.5
+    assert f"This prints {printed:.2f}".replace("-", "−") in README

@@ -172,6 +172,18 @@ def test_verdicts_of_a_better_claim() -> None:
     assert stats.judge(consistent, {"A": metrics_of(tight), "B": metrics_of(wide)}).verdict == stats.SUPPORTED
 
 
+def test_too_few_seeds_give_no_verdict() -> None:
+    # Far apart, but 4 seeds: the interval excludes 0, the verdict still waits for MIN_SEEDS seeds
+    high, low = np.array([400.0, 410.0, 405.0, 395.0]), np.array([200.0, 210.0, 205.0, 195.0])
+    result = stats.judge(claim(), {"A": metrics_of(high), "B": metrics_of(low)})
+    assert result.comparisons[0].verdict == stats.SUPPORTED
+    assert result.verdict == stats.TOO_CLOSE
+    assert "only 4 seeds" in result.measured
+    five = {"A": metrics_of(np.append(high, 402.0)), "B": metrics_of(np.append(low, 202.0))}
+    assert stats.judge(claim(), five).verdict == stats.SUPPORTED
+    assert stats.judge(claim("reaches", value=300.0), {"A": metrics_of(high)}).verdict == stats.TOO_CLOSE
+
+
 def test_a_claim_against_several_variants_needs_each() -> None:
     several = Claim(text="A beats B and C", kind="better", variant="A", others=("B", "C"))
     data = {"A": metrics_of(np.arange(10.0) + 100), "B": metrics_of(np.arange(10.0)), "C": metrics_of(np.arange(10.0) + 100.5)}

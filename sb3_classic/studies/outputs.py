@@ -277,6 +277,7 @@ resamples; each variant's seeds resampled independently):
   it excludes 0, too close to call otherwise.
 - **reaches** / **below** a level: the interval of A's metric lies at or beyond the level (*supported* / *not
   supported*), short of it (the opposite), or across it (too close to call).
+- A claim with fewer than 5 seeds in one of its variants is too close to call, whatever its intervals.
 
 Metrics per seed, from the training return of each episode (the Monitor's): the mean over all episodes of the budget,
 the mean over the last 100, and the episodes until the mean of 100 consecutive episodes first reaches the threshold

@@ -14,6 +14,9 @@ The rule (also in ``STUDIES.md``):
 - ``reaches`` (A reaches a level): the interval of A's statistic; *supported* if it lies at or beyond the level,
   *not supported* if it lies short of it, too close to call otherwise. ``below`` is the opposite claim.
 
+- Any claim whose variants have fewer than ``MIN_SEEDS`` seeds is *too close to call*, whatever its intervals: a
+  bootstrap over 2–4 values gives an interval, but not a 95% one.
+
 Statistics over seeds: ``mean`` (the mean over seeds) or ``std`` (their sample standard deviation: a claim of
 consistent learning across seeds, where lower is better).
 """
@@ -36,6 +39,8 @@ SUPPORTED = "supported"
 NOT_SUPPORTED = "not supported"
 REVERSED = "reversed"
 TOO_CLOSE = "too close to call"
+#: Fewer seeds than this in a variant of a claim: no verdict but too close to call (the report ran 5, the studies 10)
+MIN_SEEDS = 5
 METRIC_LABELS = {
     "mean_return": "mean return (all episodes)",
     "last_100_return": f"mean return (last {LAST_EPISODES} episodes)",
@@ -279,6 +284,10 @@ def judge(claim: Claim, metrics: Mapping[str, Mapping[str, np.ndarray]]) -> Clai
         comparisons.append(Comparison(None, value, verdict))
         overall = verdict
         measured = f"{what} of {claim.variant}: {value.format()} against {claim.value:g}"
+    n_seeds = min(len(metrics[name][claim.metric]) for name in (claim.variant, *claim.others))
+    if n_seeds < MIN_SEEDS:
+        overall = TOO_CLOSE
+        measured += f" (only {n_seeds} seeds in a variant: too few for a verdict, at least {MIN_SEEDS} are needed)"
     return ClaimResult(claim, overall, tuple(comparisons), measured)
 
 
