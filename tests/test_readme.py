@@ -2,6 +2,7 @@
 
 import re
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -48,3 +49,16 @@ def test_book_figure_example_prints_the_books_number(capsys: pytest.CaptureFixtu
     printed = float(capsys.readouterr().out.strip().splitlines()[-1])
     assert -17.0 < printed < -13.5
     assert f"This prints {printed:.2f}".replace("-", "−") in README
+
+
+def test_tile_coding_example_runs_as_written() -> None:
+    # The README's Mountain Car example, its whole budget (10,000 steps, ~5 s): "the first episodes take about a
+    # thousand steps each", then shorter (the book's Fig 10.1: the optimistic weights explore, episodes shorten)
+    tile_example = r"```python\n(import torch as th\n\nfrom sb3_classic import NStepSARSA, TileCoding.*?)```"
+    (example,) = re.findall(tile_example, README, flags=re.DOTALL)
+    namespace: dict[str, Any] = {}
+    exec(compile(example, "README.md tile coding example", "exec"), namespace)
+    lengths = [episode["l"] for episode in namespace["model"].ep_info_buffer]
+    assert len(lengths) >= 3
+    assert 300 < lengths[0] < 3000
+    assert lengths[-1] < lengths[0]
