@@ -5,6 +5,7 @@ import hashlib
 import inspect
 import io
 import json
+import re
 import shlex
 import subprocess
 import sys
@@ -19,7 +20,7 @@ from benchmarks.studies import SEED_REPORT_STUDIES
 from sb3_classic import REINFORCE, NStepSARSA
 from sb3_classic.harness.common import RunSpec, code_versions
 from sb3_classic.harness.runner import execute_run
-from sb3_classic.studies import stats
+from sb3_classic.studies import outputs, stats
 from sb3_classic.studies.spec import STATED, Claim, StudyError, load_study, policy_kwargs_string
 
 TINY = """
@@ -109,6 +110,9 @@ def test_readings_reinterpret_only_the_settings_a_variant_has(tmp_path: Path) ->
         (("algo: nstep_sarsa", "algo: sarsa"), ["algo: 'sarsa' is not an algorithm of rl-zoo3"]),
         (("  policy: MlpPolicy", "  policy: MlpPolicy\n  n_timesteps: 1000"), ["hyperparams.n_timesteps: the budget is"]),
         (("variants:", "vary: {n_steps: [1, 3]}\nvariants:"), ["variants: give exactly one of `vary:`"]),
+        (("others: [n1]", "others: 5"), ["claim.others: 5: a variant's name or a list of names"]),
+        (("env: CartPole-v1", "env: 5"), ["env: 5: the id of a registered Gymnasium env"]),
+        (("algo: nstep_sarsa", "algo: [nstep_sarsa]"), ["algo: ['nstep_sarsa'] is not an algorithm of rl-zoo3"]),
     ],
 )
 def test_study_file_errors_name_the_field_and_the_fix(tmp_path: Path, change: tuple[str, str], expected: list[str]) -> None:
@@ -130,6 +134,61 @@ def test_study_file_errors_are_all_listed_at_once(tmp_path: Path) -> None:
     with pytest.raises(StudyError, match=r"3 problem\(s\)") as error:
         load_study(write_study(tmp_path, text))
     assert "did you mean 'train_freq'" in str(error.value)
+
+
+@pytest.mark.parametrize(
+    ("changes", "expected"),
+    [
+        # A reading of a setting the study does not state would run the same as stated, silently
+        ([("claim:", "readings:\n  gamma_0.9: {gamma: 0.9}\nclaim:")], "readings.gamma_0.9: changes no run"),
+        # A reading of what tells the variants apart would make them one run
+        (
+            [
+                ("n3: {n_steps: 3, policy_kwargs: {net_arch: [8]}}", "n3: {n_steps: 3}"),
+                ("claim:", "readings:\n  n5: {n_steps: 5}\nclaim:"),
+            ],
+            "readings.n5: makes variants 'n1' and 'n3' the same run",
+        ),
+        # A reading's policy_kwargs mapping would replace a variant's string whole
+        (
+            [
+                ("n3: {n_steps: 3, policy_kwargs: {net_arch: [8]}}", "n3: {n_steps: 3, policy_kwargs: 'dict(net_arch=[8])'}"),
+                ("claim:", "readings:\n  relu: {policy_kwargs: {activation_fn: nn.ReLU}}\nclaim:"),
+            ],
+            "readings.relu.policy_kwargs: would replace the whole policy_kwargs string of variant 'n3'",
+        ),
+        # Two claims of one text: STUDIES.md would show the first's verdict for both
+        (
+            [
+                ("claim: {", "claims:\n  - {"),
+                ("others: [n1]}", 'others: [n1]}\n  - {text: "n = 3 beats n = 1", kind: reaches, variant: n3, value: 100}'),
+            ],
+            "claims: the text 'n = 3 beats n = 1' is given to two claims",
+        ),
+        # With a budget in env steps, seeds complete different numbers of episodes: nothing to censor at
+        (
+            [
+                ("budget: {episodes: 6}", "budget: {steps: 600}"),
+                ("others: [n1]}", "others: [n1], metric: episodes_to_threshold}"),
+            ],
+            "claim.metric: episodes_to_threshold needs a budget in episodes",
+        ),
+    ],
+)
+def test_study_files_that_would_mislead_are_errors(tmp_path: Path, changes: list[tuple[str, str]], expected: str) -> None:
+    text = TINY
+    for old, new in changes:
+        assert old in text
+        text = text.replace(old, new, 1)
+    with pytest.raises(StudyError, match=re.escape(expected)):
+        load_study(write_study(tmp_path, text))
+
+
+def test_the_step_cap_counts_each_variants_envs(tmp_path: Path) -> None:
+    study = load_study(write_study(tmp_path, TINY.replace("n3: {n_steps: 3,", "n3: {n_steps: 3, n_envs: 4,")))
+    # Every episode at CartPole-v1's time limit, and the unfinished episodes of the other envs
+    assert study.zoo_entry("n1")["n_timesteps"] == (6 + 1) * 500
+    assert study.zoo_entry("n3")["n_timesteps"] == (6 + 4) * 500
 
 
 def test_vary_names_its_variants(tmp_path: Path) -> None:
@@ -208,6 +267,35 @@ def test_verdicts_of_similar_reaches_and_below() -> None:
     below = claim("below", value=-100.0)
     assert stats.judge(below, {"A": metrics_of(np.linspace(-300, -200, 10))}).verdict == stats.SUPPORTED
     assert stats.judge(below, {"A": metrics_of(np.linspace(-90, -80, 10))}).verdict == stats.NOT_SUPPORTED
+    # On the metric's own scale, also where lower is better: episodes to the threshold, the spread over seeds
+    fast = metrics_of(np.linspace(100, 150, 10), "episodes_to_threshold")
+    assert stats.judge(claim("below", value=200.0, metric="episodes_to_threshold"), {"A": fast}).verdict == stats.SUPPORTED
+    assert (
+        stats.judge(claim("reaches", value=200.0, metric="episodes_to_threshold"), {"A": fast}).verdict == stats.NOT_SUPPORTED
+    )
+    spread = metrics_of(300 + np.random.default_rng(0).normal(0, 16, 10))
+    assert stats.judge(claim("below", value=100.0, statistic="std"), {"A": spread}).verdict == stats.SUPPORTED
+
+
+def test_a_budget_in_steps_gives_each_seed_its_own_episodes() -> None:
+    # Acrobot-like: seed 0 never learns (200 episodes of -500), seed 1 reaches -90 from episode 150 (900 episodes)
+    frames = [
+        pd.DataFrame({"return": np.full(200, -500.0)}),
+        pd.DataFrame({"return": np.concatenate([np.full(149, -500.0), np.full(751, -90.0)])}),
+    ]
+    returns = stats.seed_returns(frames)
+    metrics = stats.seed_metrics(returns, threshold=-100.0, window=100)
+    np.testing.assert_allclose(metrics["last_100_return"], [-500.0, -90.0])
+    assert metrics["reached"].tolist() == [False, True]
+    # Seed 1: the first window of 100 whose mean reaches -100 holds at most two -500s (episodes 148-149), so it ends at
+    # episode 247; seed 0 is censored at its 200
+    assert metrics["episodes_to_threshold"].tolist() == [200.0, 247.0]
+    # The figure draws the episodes every seed has
+    assert stats.returns_matrix(returns).shape == (2, 200)
+    # An episode budget: each seed's first episodes
+    assert [len(row) for row in stats.seed_returns(frames, 150)] == [150, 150]
+    with pytest.raises(ValueError, match="only 200 episodes"):
+        stats.seed_returns(frames, 300)
 
 
 def test_intervals() -> None:
@@ -327,6 +415,21 @@ def test_the_report_studies_load() -> None:
     assert runs > 500
 
 
+def test_the_compute_counts_each_shared_run_once(tmp_path: Path) -> None:
+    # Two studies that share a run (the same settings, e.g. a report's baseline in two figures): STUDIES.md's compute
+    # is that of the distinct runs; a study's own table still counts all of its runs
+    def record(name: str, run_seconds: dict[str, float]) -> None:
+        claim = {"text": "a beats b", "reading": STATED, "verdict": stats.SUPPORTED, "measured": "+1"}
+        content = {"study": name, "title": name, "source": name, "command": f"python -m x {name}.yml", "claims": [claim]}
+        content |= {"claim_texts": ["a beats b"], "runs": len(run_seconds), "run_seconds": run_seconds}
+        (tmp_path / f"{name}.json").write_text(json.dumps(content))
+
+    record("one", {"shared": 1800.0, "own-1": 3600.0})
+    record("two", {"shared": 1800.0, "own-2": 1800.0})
+    index = outputs.write_studies_index([], tmp_path).read_text()
+    assert "Compute: 3 distinct runs, 2.0 CPU hours" in index
+
+
 # ---- the command, end to end ---------------------------------------------------------------------------------------
 
 
@@ -353,7 +456,7 @@ def test_a_tiny_study_runs_end_to_end(tmp_path: Path) -> None:
     index = (results / "STUDIES.md").read_text()
     assert "| n = 3 beats n = 1 |" in index
     assert verdict["verdict"] in index
-    assert "Compute: 4 runs" in index
+    assert "Compute: 4 distinct runs" in index
     # Each run's episodes, exactly the budget
     for run_file in cache.rglob("episodes.csv"):
         assert len(pd.read_csv(run_file)) == 6

@@ -37,12 +37,14 @@ class StudyResults:
     A study's runs found in the cache, and what follows from them.
 
     :param study: the study
-    :param returns: per (reading, variant), the training returns, seeds × episodes
+    :param returns: per (reading, variant), the training returns, seeds × episodes (the figure's: with a budget in
+        env steps, the episodes every seed completed; the metrics are over each seed's own)
     :param seeds: per (reading, variant), the seeds found
     :param metrics: per (reading, variant), ``stats.seed_metrics``
     :param verdicts: per reading, the result of each claim (absent where a variant has no run)
     :param missing: the runs not in the cache
-    :param learn_seconds: the ``learn()`` time of the runs found, summed (one CPU core each)
+    :param run_seconds: per run found (its cache key), its ``learn()`` and final evaluation time in seconds (one CPU
+        core each); studies and readings that share a run share its key
     """
 
     study: StudySpec
@@ -51,8 +53,13 @@ class StudyResults:
     metrics: dict[tuple[str, str], dict[str, np.ndarray]] = field(default_factory=dict)
     verdicts: dict[str, list[stats.ClaimResult]] = field(default_factory=dict)
     missing: list[StudyRun] = field(default_factory=list)
-    learn_seconds: float = 0.0
+    run_seconds: dict[str, float] = field(default_factory=dict)
     n_runs: int = 0
+
+    @property
+    def learn_seconds(self) -> float:
+        """The compute of the study's distinct runs, in CPU seconds."""
+        return math.fsum(self.run_seconds.values())
 
 
 def load_study_results(study: StudySpec, cache_dir: Path) -> StudyResults:
@@ -69,13 +76,13 @@ def load_study_results(study: StudySpec, cache_dir: Path) -> StudyResults:
             results.missing.append(run)
             continue
         summary = load_run(run_dir)
-        results.learn_seconds += float(summary["learn_time_s"]) + float(summary.get("eval_time_s", 0.0))
+        results.run_seconds[run.spec.key()] = float(summary["learn_time_s"]) + float(summary.get("eval_time_s", 0.0))
         results.n_runs += 1
         frames.setdefault((run.reading, run.variant), []).append(pd.read_csv(run_dir / EPISODES_FILE))
         results.seeds.setdefault((run.reading, run.variant), []).append(run.seed)
     for key, episodes in frames.items():
-        returns = stats.returns_matrix(episodes, study.budget.episodes)
-        results.returns[key] = returns
+        returns = stats.seed_returns(episodes, study.budget.episodes)
+        results.returns[key] = stats.returns_matrix(returns)
         results.metrics[key] = stats.seed_metrics(returns, study.threshold, study.threshold_window)
     for reading in study.readings:
         variants = {variant: results.metrics.get((reading, variant)) for variant in study.variants}
@@ -205,6 +212,7 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         "runs": results.n_runs,
         "missing_runs": len(results.missing),
         "cpu_hours": results.learn_seconds / 3600,
+        "run_seconds": results.run_seconds,
         "claims": claims,
         "claim_texts": [claim.text for claim in study.claims],
     }
@@ -222,7 +230,8 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         "```",
         "",
         f"- {study.algo} on {study.env_id}, {len(study.seeds)} seeds per variant, {study.budget.describe()} per run "
-        f"({results.n_runs} runs found, {len(results.missing)} missing; {results.learn_seconds / 3600:.2f} CPU hours).",
+        f"({results.n_runs} runs found, {len(results.missing)} missing; {results.learn_seconds / 3600:.2f} CPU hours for "
+        f"the {len(results.run_seconds)} distinct ones).",
         f"- Threshold: {study.threshold:g}, reached when the mean of {study.threshold_window} consecutive training "
         "episodes reaches it (episodes to threshold: the last episode of the first such window; seeds that never "
         "reach it count as the episode budget, a lower bound).",
@@ -275,13 +284,14 @@ resamples; each variant's seeds resampled independently):
   every one is reversed, *not supported* if some are reversed, too close to call otherwise.
 - **similar** (A and B alike): *supported* if the interval of A − B lies within ± the claim's margin, *not supported* if
   it excludes 0, too close to call otherwise.
-- **reaches** / **below** a level: the interval of A's metric lies at or beyond the level (*supported* / *not
-  supported*), short of it (the opposite), or across it (too close to call).
+- **reaches** / **below** a level, on the metric's own scale: the interval of A's metric lies at or above the level
+  (*supported* / *not supported*), below it (the opposite), or across it (too close to call).
 - A claim with fewer than 5 seeds in one of its variants is too close to call, whatever its intervals.
 
 Metrics per seed, from the training return of each episode (the Monitor's): the mean over all episodes of the budget,
-the mean over the last 100, and the episodes until the mean of 100 consecutive episodes first reaches the threshold
-(475 on CartPole-v1, −100 on Acrobot-v1; a seed that never does counts as the budget)."""
+the mean over the last 100, and the episodes until the mean of the study's `threshold_window` consecutive episodes
+(default 100) first reaches its threshold (default: the env's reward threshold, 475 on CartPole-v1, −100 on
+Acrobot-v1; a seed that never does counts as the budget)."""
 
 
 def write_studies_index(
@@ -311,8 +321,11 @@ def write_studies_index(
         if name not in listed:
             rows += _claim_rows(name, record.get("source", ""), record["claim_texts"], record, record["command"])
     done = [record for record in records.values() if not record.get("reduced")]
-    runs = sum(record["runs"] for record in done)
-    hours = sum(record["cpu_hours"] for record in done)
+    # Each distinct run once: studies (and readings) that share settings share their runs
+    run_seconds: dict[str, float] = {}
+    for record in done:
+        run_seconds.update(record.get("run_seconds", {}))
+    runs, hours = len(run_seconds), math.fsum(run_seconds.values()) / 3600
     counts: dict[str, int] = {}
     for row in rows:
         verdict = row[3].split(" (")[0]
@@ -326,8 +339,9 @@ def write_studies_index(
         "",
         f"The studies listed: {len(planned)} runs, {len(set(planned))} distinct (runs of the same settings, in several "
         "studies or readings, share their cache entry).",
-        f"Compute: {runs} runs, {hours:.1f} CPU hours (`learn()` and the final evaluation, one core per run), "
-        "summed over the studies' results in this folder (they may come from several invocations: the cache resumes).",
+        f"Compute: {runs} distinct runs, {hours:.1f} CPU hours (`learn()` and the final evaluation, one core per run), "
+        "summed over the studies' results in this folder, each run once (they may come from several invocations: the "
+        "cache resumes).",
         "",
         "| Source | Claim | Measured | Verdict | Command |",
         "|---|---|---|---|---|",
@@ -361,11 +375,6 @@ def _claim_rows(
             verdict += " (reduced run)"
         rows.append((f"[{source or name}]({name}.md)", text, measured, verdict, f"`{command}`"))
     return rows
-
-
-def cpu_hours(results: Sequence[StudyResults]) -> float:
-    """:return: the ``learn()`` hours of all the runs found"""
-    return math.fsum(result.learn_seconds for result in results) / 3600
 
 
 def _without_budget(entry: dict[str, Any]) -> dict[str, Any]:

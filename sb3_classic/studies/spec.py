@@ -183,15 +183,17 @@ class StudySpec:
             reading's, for the settings the variant has (a reading reinterprets a setting, it does not add one: a
             variant without learning-rate decay is the same run under every reading of its factor)
         """
-        entry = merge(self.hyperparams, self.variants[variant])
-        entry = merge(entry, {key: value for key, value in self.readings[reading].items() if key in entry})
+        entry = read_entry(self.hyperparams, self.variants[variant], self.readings[reading])
         if isinstance(entry.get("policy_kwargs"), Mapping):
             entry["policy_kwargs"] = policy_kwargs_string(entry["policy_kwargs"])
         # The zoo requires it; the run's budget (and, with an episode budget, the callback that stops it) decides
-        return {"n_timesteps": self.step_cap(), **entry}
+        return {"n_timesteps": self.step_cap(int(entry.get("n_envs", 1))), **entry}
 
-    def step_cap(self) -> int:
-        """:return: the env steps of each run: the budget in steps, or the cap of an episode budget"""
+    def step_cap(self, n_envs: int = 1) -> int:
+        """
+        :param n_envs: the run's envs
+        :return: the env steps of a run: the budget in steps, or the cap of an episode budget
+        """
         if self.budget.steps is not None:
             return self.budget.steps
         assert self.budget.episodes is not None
@@ -199,7 +201,6 @@ class StudySpec:
             return self.budget.max_steps
         limit = gymnasium.spec(self.env_id).max_episode_steps
         assert limit is not None, "checked by load_study"
-        n_envs = int(self.hyperparams.get("n_envs", 1))
         # Every episode at the time limit, and the unfinished episodes of the other envs
         return (self.budget.episodes + n_envs) * limit
 
@@ -210,14 +211,15 @@ class StudySpec:
             for reading in self.readings:
                 for variant in self.variants:
                     label = f"{self.name} {variant}" + ("" if reading == STATED else f" [{reading}]") + f" seed {seed}"
+                    entry = self.zoo_entry(variant, reading)
                     spec = RunSpec(
                         algo=self.algo,
                         env_id=self.env_id,
                         seed=seed,
-                        n_timesteps=self.step_cap(),
+                        n_timesteps=entry["n_timesteps"],
                         eval_freq=0,
                         n_eval_episodes=EVAL_EPISODES,
-                        hyperparams_yaml=yaml.safe_dump(self.zoo_entry(variant, reading), sort_keys=True),
+                        hyperparams_yaml=yaml.safe_dump(entry, sort_keys=True),
                         max_episodes=self.budget.episodes,
                         label=label,
                     )
@@ -232,6 +234,16 @@ class StudySpec:
         if steps is not None:
             budget = Budget(steps=steps)
         return dataclasses.replace(self, seeds=tuple(range(seeds)) if seeds is not None else self.seeds, budget=budget)
+
+
+def read_entry(hyperparams: Mapping[str, Any], variant: Mapping[str, Any], reading: Mapping[str, Any]) -> dict[str, Any]:
+    """
+    :return: the base ``hyperparams`` with a variant's overrides, then a reading's, for the settings the variant has
+        (a reading reinterprets a setting, it does not add one: a variant without learning-rate decay is the same run
+        under every reading of its factor)
+    """
+    entry = merge(hyperparams, variant)
+    return merge(entry, {key: value for key, value in reading.items() if key in entry})
 
 
 def merge(base: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
@@ -356,17 +368,7 @@ def load_study(path: Path | str) -> StudySpec:
             check.fail(key, "missing (a study needs env, algo, budget, hyperparams, variants or vary, and a claim)")
     check.raise_if_any()
 
-    env_id = data["env"]
-    try:
-        env_spec = gymnasium.spec(env_id)
-    except gymnasium.error.Error as error:
-        check.fail("env", f"{env_id!r} is not a registered Gymnasium env ({error})")
-        env_spec = None
-    register_algorithms()
-    algo = data["algo"]
-    if algo not in rl_zoo3.ALGOS:
-        check.fail("algo", f"{algo!r} is not an algorithm of rl-zoo3: choose one of {', '.join(sorted(rl_zoo3.ALGOS))}")
-        check.raise_if_any()
+    env_id, env_spec, algo = _env_and_algo(check, data)
     arguments = algorithm_arguments(algo)
 
     seeds = _seeds(check, data.get("seeds", 10))
@@ -377,9 +379,12 @@ def load_study(path: Path | str) -> StudySpec:
     hyperparams = check.hyperparams("hyperparams", data["hyperparams"], arguments, algo)
     variants = _variants(check, data, arguments, algo)
     readings = _readings(check, data.get("readings") or {}, arguments, algo)
-    for name, overrides in [*variants.items(), *readings.items()]:
+    for name, overrides in variants.items():
         if isinstance(overrides.get("policy_kwargs"), Mapping) and isinstance(hyperparams.get("policy_kwargs"), str):
-            check.fail(f"{name}.policy_kwargs", "overrides keys of a string: write the base's policy_kwargs as a mapping")
+            check.fail(
+                f"variants.{name}.policy_kwargs", "overrides keys of a string: write the base's policy_kwargs as a mapping"
+            )
+    _check_readings(check, hyperparams, variants, readings)
 
     # The study's own, else the harness's (CartPole-v1, Acrobot-v1), else Gymnasium's reward_threshold of the env
     default_threshold = THRESHOLDS.get(env_id, env_spec.reward_threshold if env_spec is not None else None)
@@ -388,6 +393,14 @@ def load_study(path: Path | str) -> StudySpec:
         check.fail("threshold", f"{threshold!r}: give the return that counts as solved on {env_id}, e.g. threshold: 475")
         threshold = math.nan
     claims = _claims(check, data, variants, float(threshold))
+    if budget is not None and budget.steps is not None:
+        for index, claim in enumerate(claims):
+            if claim.metric == "episodes_to_threshold":
+                check.fail(
+                    f"claims[{index}].metric" if "claims" in data else "claim.metric",
+                    "episodes_to_threshold needs a budget in episodes (with one in env steps, each seed has its own "
+                    "episode count to censor at): write budget: {episodes: ...}, or claim on a return metric",
+                )
     window = check.positive_int("threshold_window", data.get("threshold_window", 100))
     smooth = check.positive_int("smooth", data.get("smooth", 10))
     check.raise_if_any()
@@ -412,6 +425,25 @@ def load_study(path: Path | str) -> StudySpec:
         notes=str(data.get("notes", "")).strip(),
         path=path,
     )
+
+
+def _env_and_algo(check: _Checker, data: Mapping[str, Any]) -> tuple[str, Any, str]:
+    """:return: the env id, its Gymnasium spec (None if unknown) and the algorithm; raises if the algorithm is unknown"""
+    env_id = data["env"]
+    env_spec = None
+    if not isinstance(env_id, str):
+        check.fail("env", f"{env_id!r}: the id of a registered Gymnasium env, e.g. env: CartPole-v1")
+    else:
+        try:
+            env_spec = gymnasium.spec(env_id)
+        except gymnasium.error.Error as error:
+            check.fail("env", f"{env_id!r} is not a registered Gymnasium env ({error})")
+    register_algorithms()
+    algo = data["algo"]
+    if not isinstance(algo, str) or algo not in rl_zoo3.ALGOS:
+        check.fail("algo", f"{algo!r} is not an algorithm of rl-zoo3: choose one of {', '.join(sorted(rl_zoo3.ALGOS))}")
+        check.raise_if_any()
+    return env_id, env_spec, algo
 
 
 def _seeds(check: _Checker, value: Any) -> tuple[int, ...]:
@@ -487,6 +519,44 @@ def _readings(check: _Checker, raw: Any, arguments: set[str], algo: str) -> dict
     return readings
 
 
+def _check_readings(
+    check: _Checker, hyperparams: Mapping[str, Any], variants: Mapping[str, Mapping[str, Any]], readings: Mapping[str, Any]
+) -> None:
+    """Each reading must change some run, and must not make two variants the same run."""
+    stated = {name: read_entry(hyperparams, overrides, {}) for name, overrides in variants.items()}
+    for reading, overrides in readings.items():
+        if reading == STATED or not overrides:
+            continue
+        where = f"readings.{reading}"
+        if isinstance(overrides.get("policy_kwargs"), Mapping):
+            strings = [name for name, entry in stated.items() if isinstance(entry.get("policy_kwargs"), str)]
+            if strings:
+                check.fail(
+                    f"{where}.policy_kwargs",
+                    f"would replace the whole policy_kwargs string of variant {strings[0]!r}: write the base's and the "
+                    "variants' policy_kwargs as mappings",
+                )
+                continue
+        read = {name: read_entry(hyperparams, variants[name], overrides) for name in variants}
+        if read == stated:
+            keys = ", ".join(map(str, overrides))
+            check.fail(
+                where,
+                f"changes no run: a reading reinterprets a setting the study states, and {keys} is not set (to another "
+                "value) in hyperparams or any variant: add it to hyperparams with the value read as stated",
+            )
+            continue
+        names = list(variants)
+        for index, first in enumerate(names):
+            for second in names[index + 1 :]:
+                if stated[first] != stated[second] and read[first] == read[second]:
+                    check.fail(
+                        where,
+                        f"makes variants {first!r} and {second!r} the same run (it sets what tells them apart): a "
+                        "reading must leave the varied settings alone",
+                    )
+
+
 def _claims(check: _Checker, data: Mapping[str, Any], variants: Mapping[str, Any], threshold: float) -> tuple[Claim, ...]:
     if ("claim" in data) == ("claims" in data):
         check.fail("claim", "give exactly one of `claim:` (one claim) and `claims:` (a list)")
@@ -502,6 +572,9 @@ def _claims(check: _Checker, data: Mapping[str, Any], variants: Mapping[str, Any
             check.fail(where, f"{item!r}: a mapping with text, kind, variant, ...")
             continue
         claims.append(_claim(check, where, item, variants, threshold))
+    texts = [claim.text for claim in claims]
+    for text in sorted({text for text in texts if texts.count(text) > 1}):
+        check.fail("claims", f"the text {text!r} is given to two claims: STUDIES.md tells claims apart by their text")
     return tuple(claims)
 
 
@@ -519,7 +592,11 @@ def _claim(check: _Checker, where: str, item: Mapping[str, Any], variants: Mappi
     if variant not in variants:
         check.fail(f"{where}.variant", f"{variant!r} is not a variant: choose one of {choices}")
     others = item.get("others", [])
-    others = [others] if isinstance(others, str) else list(others)
+    if isinstance(others, str):
+        others = [others]
+    elif not isinstance(others, list):
+        check.fail(f"{where}.others", f"{others!r}: a variant's name or a list of names, e.g. others: [n_steps=1]")
+        others = []
     for other in others:
         if other not in variants:
             check.fail(f"{where}.others", f"{other!r} is not a variant: choose among {choices}")

@@ -11,8 +11,10 @@ The rule (also in ``STUDIES.md``):
   some not, too close to call otherwise.
 - ``similar`` (A and B alike): *supported* if the interval of A − B lies within ± the claim's margin, *not
   supported* if it excludes 0, too close to call otherwise (it contains 0 but is wider than the margin).
-- ``reaches`` (A reaches a level): the interval of A's statistic; *supported* if it lies at or beyond the level,
-  *not supported* if it lies short of it, too close to call otherwise. ``below`` is the opposite claim.
+- ``reaches`` (A's statistic is at least a level): the interval of A's statistic; *supported* if it lies at or above
+  the level, *not supported* if it lies below it, too close to call otherwise. ``below`` (A's statistic is below the
+  level) is the opposite claim. Both compare on the metric's own scale, whichever way is better: "the spread is
+  below 20", "episodes to threshold below 200".
 
 - Any claim whose variants have fewer than ``MIN_SEEDS`` seeds is *too close to call*, whatever its intervals: a
   bootstrap over 2–4 values gives an interval, but not a 95% one.
@@ -63,17 +65,30 @@ class Interval:
         return f"{self.estimate:.{digits}f} [{self.low:.{digits}f}, {self.high:.{digits}f}]"
 
 
-def returns_matrix(episodes: Sequence[pd.DataFrame], n_episodes: int | None = None) -> np.ndarray:
+def seed_returns(episodes: Sequence[pd.DataFrame], n_episodes: int | None = None) -> list[np.ndarray]:
     """
     :param episodes: per seed, its ``episodes.csv`` (one row per training episode, in end order)
-    :param n_episodes: episodes to keep (default: as many as every seed has)
-    :return: the training return of each episode, seeds × episodes
+    :param n_episodes: the episode budget: each seed's first ``n_episodes``; None (a budget in env steps): all of
+        each seed's episodes, as many as it completed
+    :return: per seed, the training return of each of its episodes
+    :raise ValueError: if a seed has fewer than ``n_episodes``
     """
-    counts = [len(frame) for frame in episodes]
-    n = min(counts) if n_episodes is None else n_episodes
-    if min(counts) < n:
-        raise ValueError(f"a seed has only {min(counts)} episodes, fewer than the {n} asked for")
-    return np.stack([frame["return"].to_numpy(dtype=float)[:n] for frame in episodes])
+    returns = [frame["return"].to_numpy(dtype=float) for frame in episodes]
+    if n_episodes is None:
+        return returns
+    if min(len(row) for row in returns) < n_episodes:
+        raise ValueError(f"a seed has only {min(map(len, returns))} episodes, fewer than the {n_episodes} asked for")
+    return [row[:n_episodes] for row in returns]
+
+
+def returns_matrix(returns: Sequence[np.ndarray]) -> np.ndarray:
+    """
+    :param returns: per seed, its episodes' returns (``seed_returns``)
+    :return: seeds × episodes, the episodes every seed has (the figure's: with a budget in env steps, seeds complete
+        different numbers of episodes)
+    """
+    n = min(len(row) for row in returns)
+    return np.stack([row[:n] for row in returns])
 
 
 def moving_average(returns: np.ndarray, window: int) -> np.ndarray:
@@ -108,19 +123,22 @@ def episodes_to_threshold(returns: np.ndarray, threshold: float, window: int) ->
     return first.astype(float), np.asarray(reached, dtype=bool)
 
 
-def seed_metrics(returns: np.ndarray, threshold: float, window: int) -> dict[str, np.ndarray]:
+def seed_metrics(returns: Sequence[np.ndarray] | np.ndarray, threshold: float, window: int) -> dict[str, np.ndarray]:
     """
-    :param returns: seeds × episodes
+    :param returns: per seed, the return of each of its episodes (seeds × episodes, or one array per seed of its
+        own length: with a budget in env steps, each seed's metrics are over the episodes it completed, and a seed
+        that never reaches the threshold is censored at its own episode count)
     :param threshold: see ``episodes_to_threshold``
     :param window: see ``episodes_to_threshold``
     :return: per metric of ``METRIC_LABELS``, its value for each seed; and ``reached`` (bool per seed)
     """
-    first, reached = episodes_to_threshold(returns, threshold, window)
+    rows = [np.asarray(row, dtype=float) for row in returns]
+    to_threshold = [episodes_to_threshold(row[None], threshold, window) for row in rows]
     return {
-        "mean_return": returns.mean(axis=1),
-        "last_100_return": returns[:, -LAST_EPISODES:].mean(axis=1),
-        "episodes_to_threshold": first,
-        "reached": reached,
+        "mean_return": np.array([row.mean() for row in rows]),
+        "last_100_return": np.array([row[-LAST_EPISODES:].mean() for row in rows]),
+        "episodes_to_threshold": np.concatenate([first for first, _ in to_threshold]),
+        "reached": np.concatenate([reached for _, reached in to_threshold]),
     }
 
 
@@ -271,8 +289,8 @@ def judge(claim: Claim, metrics: Mapping[str, Mapping[str, np.ndarray]]) -> Clai
     else:
         assert claim.value is not None
         value = interval(ours, claim.statistic)
-        # Distances beyond the level, positive on the claimed side of "reaches"
-        low, high = sorted((sign * (value.low - claim.value), sign * (value.high - claim.value)))
+        # On the metric's own scale, whichever way is better: "reaches" is ≥ the level, "below" is < it
+        low, high = value.low - claim.value, value.high - claim.value
         if np.isnan(low):
             verdict = TOO_CLOSE
         elif low >= 0:
