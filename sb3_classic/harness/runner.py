@@ -350,7 +350,8 @@ def _train(spec: RunSpec, folder: Path, config: Path, queue: ProgressQueue | Non
     if spec.max_episodes is not None and len(episodes) < spec.max_episodes:
         raise RuntimeError(
             f"{spec.name} reached its step cap ({spec.n_timesteps} env steps) after {len(episodes)} of its "
-            f"{spec.max_episodes} episodes: raise the cap"
+            f"{spec.max_episodes} episodes: raise the cap (in a study file, budget: {{episodes: "
+            f"{spec.max_episodes}, max_steps: ...}})"
         )
     episodes.to_csv(folder / EPISODES_FILE, index=False)
     evaluations = evaluations_frame(
