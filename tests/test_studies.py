@@ -1,6 +1,7 @@
 """Hyperparameter studies (issue 14): the study file's checks, the statistics and verdicts, the episode budget, the
 seed report's study files, and a tiny study run end to end by the command."""
 
+import contextlib
 import hashlib
 import inspect
 import io
@@ -20,6 +21,7 @@ from benchmarks.studies import SEED_REPORT_STUDIES
 from sb3_classic import REINFORCE, NStepSARSA
 from sb3_classic.harness.common import RunSpec, code_versions
 from sb3_classic.harness.runner import execute_run
+from sb3_classic.studies import cli as studies_cli
 from sb3_classic.studies import outputs, stats
 from sb3_classic.studies.spec import STATED, Claim, StudyError, load_study, policy_kwargs_string
 
@@ -100,7 +102,6 @@ def test_readings_reinterpret_only_the_settings_a_variant_has(tmp_path: Path) ->
             ["hyperparams.train_frequency: nstep_sarsa has no argument", "'train_freq'"],
         ),
         (("learning_rate: !!float 1e-3", "learning_rate: 1e-3"), ["hyperparams.learning_rate: '1e-3' is read as a string"]),
-        (("budget: {episodes: 6}", "budget: {episodes: 6, steps: 100}"), ["budget: give one of episodes"]),
         (("budget: {episodes: 6}", "budget: {episodes: -6}"), ["budget.episodes: -6 is not a positive integer"]),
         (("others: [n1]", "others: [n2]"), ["claim.others: 'n2' is not a variant"]),
         (("kind: better", "kind: beats"), ["claim.kind: 'beats': choose one of better, similar, reaches, below"]),
@@ -113,6 +114,10 @@ def test_readings_reinterpret_only_the_settings_a_variant_has(tmp_path: Path) ->
         (("others: [n1]", "others: 5"), ["claim.others: 5: a variant's name or a list of names"]),
         (("env: CartPole-v1", "env: 5"), ["env: 5: the id of a registered Gymnasium env"]),
         (("algo: nstep_sarsa", "algo: [nstep_sarsa]"), ["algo: ['nstep_sarsa'] is not an algorithm of rl-zoo3"]),
+        (("seeds: 2", "seeds: 2\nseeds: 3"), ["'seeds' is given twice in one mapping: keep one"]),
+        (("budget: {episodes: 6}", "budget: {episode: 6}"), ["budget: {'episode': 6} ('episode': did you mean 'episodes'?)"]),
+        (("budget: {episodes: 6}", "budget: {episodes: 6, steps: 100}"), ["budget: give episodes or steps, not both"]),
+        (("{text:", "{txt:"), ["claim.txt: unknown field: did you mean 'text'?", "claim.text: missing: the claim"]),
     ],
 )
 def test_study_file_errors_name_the_field_and_the_fix(tmp_path: Path, change: tuple[str, str], expected: list[str]) -> None:
@@ -415,6 +420,37 @@ def test_the_report_studies_load() -> None:
     assert runs > 500
 
 
+def test_settings_only_the_algorithm_can_judge_fail_before_any_run(tmp_path: Path) -> None:
+    # A policy_kwargs key, an activation's name, an option's value: each variant's model is built once, before anything
+    # runs, and every problem is named with its file and variant
+    text = TINY.replace("n1: {n_steps: 1}", "n1: {n_steps: 1, update_mode: perstep}").replace("[8]}", "[8], net_arc: [4]}")
+    study_file = write_study(tmp_path, text)
+    cache = tmp_path / "cache"
+    output = io.StringIO()
+    with contextlib.redirect_stdout(output):
+        status = studies_cli.main([str(study_file), "--cache-dir", str(cache), "--results-dir", str(tmp_path / "out")])
+    assert status == 2
+    printed = " ".join(output.getvalue().split())
+    assert "Nothing was run" in printed
+    assert f"{study_file}: variant 'n1': ValueError: update_mode='perstep' must be one of" in printed
+    assert f"{study_file}: variant 'n3': TypeError:" in printed
+    assert "'net_arc'" in printed
+    assert not cache.exists() or not any(cache.rglob("run.json"))
+
+
+def test_report_only_names_the_runs_not_run(tmp_path: Path) -> None:
+    output = io.StringIO()
+    with contextlib.redirect_stdout(output):
+        status = studies_cli.main(
+            [str(write_study(tmp_path, TINY)), "--report-only", "--cache-dir", str(tmp_path / "cache"), "--results-dir",
+             str(tmp_path / "out")]
+        )  # fmt: skip
+    assert status == 1
+    printed = " ".join(output.getvalue().split())
+    assert "4 runs not run yet (this command runs nothing: run it without --report-only)" in printed
+    assert "failed" not in printed
+
+
 def test_the_compute_counts_each_shared_run_once(tmp_path: Path) -> None:
     # Two studies that share a run (the same settings, e.g. a report's baseline in two figures): STUDIES.md's compute
     # is that of the distinct runs; a study's own table still counts all of its runs
@@ -428,6 +464,13 @@ def test_the_compute_counts_each_shared_run_once(tmp_path: Path) -> None:
     record("two", {"shared": 1800.0, "own-2": 1800.0})
     index = outputs.write_studies_index([], tmp_path).read_text()
     assert "Compute: 3 distinct runs, 2.0 CPU hours" in index
+    # A folder of reduced runs counts those, and its commands show their budget
+    record("one", {"quick": 360.0})
+    (tmp_path / "one.json").write_text(json.dumps(json.loads((tmp_path / "one.json").read_text()) | {"reduced": True}))
+    study = load_study(write_study(tmp_path, TINY, "one.yml"))
+    reduced = outputs.write_studies_index([study], tmp_path, extra=["--seeds", "2"], reduced=True).read_text()
+    assert "Compute: 1 distinct run, 0.1 CPU hours" in reduced
+    assert "one.yml --seeds 2`" in reduced
 
 
 # ---- the command, end to end ---------------------------------------------------------------------------------------

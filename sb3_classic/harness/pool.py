@@ -211,16 +211,18 @@ def _store(spec: RunSpec, future: "Future[RunResult]", cache_dir: Path) -> str |
     return None
 
 
-def report_missing(missing: Sequence[RunSpec], console: Console) -> int:
+def report_missing(missing: Sequence[RunSpec], console: Console, ran: bool = True) -> int:
     """
     Whatever happened to them (errors, dead workers), the runs not in the cache are named, never left out quietly.
 
     :param missing: the runs of the command not in the cache
     :param console: where to name them
+    :param ran: whether the command ran its missing runs (False: a report from the cache alone, which runs nothing)
     :return: the command's exit status: 1 if any is missing
     """
     if not missing:
         return 0
     names = ", ".join(spec.name for spec in missing)
-    console.print(f"[red]{len(missing)} runs failed, not in the cache: {escape(names)}[/red]", highlight=False, soft_wrap=True)
+    what = "failed" if ran else "not run yet (this command runs nothing: run it without --report-only)"
+    console.print(f"[red]{len(missing)} runs {what}, not in the cache: {escape(names)}[/red]", highlight=False, soft_wrap=True)
     return 1

@@ -1,6 +1,7 @@
 """One learning run, built and trained by rl-zoo3's ExperimentManager, evaluated periodically, cached on disk."""
 
 import argparse
+import io
 import json
 import platform
 import shutil
@@ -295,8 +296,34 @@ def run_in_worker(spec: RunSpec) -> RunResult:
     return execute_run(spec, _worker_queue)
 
 
-def _train(spec: RunSpec, folder: Path, config: Path, queue: ProgressQueue | None) -> dict[str, Any]:
-    exp_manager = ExperimentManager(
+def check_run(spec: RunSpec) -> None:
+    """
+    Build the run's envs and model as ``execute_run`` does (rl-zoo3's ``ExperimentManager``), without training: a
+    setting the zoo or the algorithm rejects (an unknown policy or ``policy_kwargs`` key, a value out of its range)
+    fails here in a second, before any run starts.
+
+    :param spec: the run
+    :raise RunError: with the error the zoo or the algorithm raised, and the log of the attempt
+    """
+    with tempfile.TemporaryDirectory(prefix="sb3-classic-check-") as scratch:
+        folder = Path(scratch)
+        config = folder / "hyperparams.yml"
+        config.write_text(yaml.safe_dump({spec.env_id: spec.hyperparams}, sort_keys=True))
+        register_algorithms()
+        log = io.StringIO()
+        try:
+            with redirect_stdout(log), redirect_stderr(log):
+                setup = _experiment_manager(spec, folder, config).setup_experiment()
+                assert setup is not None, "the ExperimentManager only returns None when optimizing hyperparameters"
+                model, _ = setup
+                assert model.env is not None
+                model.env.close()
+        except Exception as error:
+            raise RunError(f"{type(error).__name__}: {error}", log.getvalue() + traceback.format_exc()) from error
+
+
+def _experiment_manager(spec: RunSpec, folder: Path, config: Path) -> ExperimentManager:
+    return ExperimentManager(
         argparse.Namespace(),
         spec.algo,
         spec.env_id,
@@ -311,6 +338,10 @@ def _train(spec: RunSpec, folder: Path, config: Path, queue: ProgressQueue | Non
         device="cpu",
         config=str(config),
     )
+
+
+def _train(spec: RunSpec, folder: Path, config: Path, queue: ProgressQueue | None) -> dict[str, Any]:
+    exp_manager = _experiment_manager(spec, folder, config)
     setup = exp_manager.setup_experiment()
     assert setup is not None, "the ExperimentManager only returns None when optimizing hyperparameters"
     model, _ = setup

@@ -16,9 +16,9 @@ from rich.console import Console
 from rich.markup import escape
 
 from sb3_classic.harness.pool import report_missing, run_missing_runs
-from sb3_classic.harness.runner import RUN_FILE
+from sb3_classic.harness.runner import RUN_FILE, RunError, check_run
 from sb3_classic.studies.outputs import PROGRAM, load_study_results, study_command, write_studies_index, write_study
-from sb3_classic.studies.spec import StudyError, StudySpec, load_study
+from sb3_classic.studies.spec import STATED, StudyError, StudyRun, StudySpec, load_study
 
 #: Where reduced runs (--seeds, --episodes, --steps) write their outputs, inside the cache: they are not the study's
 REDUCED_RESULTS = "quick-studies"
@@ -136,13 +136,24 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
             study_runs = study.runs()
             cached = sum((run.spec.run_dir(args.cache_dir) / RUN_FILE).exists() for run in study_runs)
             console.print(
-                f"{study.name}: {len(study.variants)} variants × {len(study.readings)} readings × {len(study.seeds)} seeds, "
+                f"{study.name}: {len(study.variants)} variants × {len(study.readings)} "
+                f"{'reading' if len(study.readings) == 1 else 'readings'} × {len(study.seeds)} seeds, "
                 f"{study.budget.describe()}: {len(study_runs)} runs, {cached} cached",
                 highlight=False,
             )
         return 0
 
     if not args.report_only and pending:
+        problems = check_settings(studies, {spec.key() for spec in pending}, console)
+        if problems:
+            console.print(
+                "[red]Nothing was run: rl-zoo3 or the algorithm rejects these settings (fix the study file):\n  "
+                + "\n  ".join(escape(problem) for problem in problems)
+                + "[/red]",
+                highlight=False,
+                soft_wrap=True,
+            )
+            return 2
         start = time.perf_counter()
         status = run_missing_runs(len(runs), pending, args.workers, args.cache_dir, console, args.scheduler)
         if status is not None:
@@ -174,9 +185,36 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
             study for study in map(load_study, sorted(defaults.catalogue.glob("*.yml"))) if study.name not in shipped
         ]
     title = "Studies" + (" (reduced runs)" if reduced else "")
-    index = write_studies_index(catalogue, results_dir, title, defaults.program, defaults.root)
+    index = write_studies_index(catalogue, results_dir, title, defaults.program, defaults.root, budget, reduced)
     console.print(f"wrote {index}", highlight=False)
-    return report_missing(missing, console)
+    return report_missing(missing, console, ran=not args.report_only)
+
+
+def check_settings(studies: Sequence[StudySpec], pending: set[str], console: Console) -> list[str]:
+    """
+    Build the model of each distinct setting among the runs to run (``check_run``: the envs and the model, no
+    training), so that a setting the loader cannot judge (a ``policy_kwargs`` key, an activation's name, an option's
+    value) fails before any run starts, not in every run of it.
+
+    :param studies: the studies
+    :param pending: the cache keys of the runs to run
+    :param console: where to say what is checked
+    :return: the problems, each naming the study file, the variant (and reading) and the error
+    """
+    to_check: dict[tuple[str, str, str], tuple[StudySpec, StudyRun]] = {}
+    for study in studies:
+        for run in study.runs():
+            if run.spec.key() in pending:
+                to_check.setdefault((run.spec.algo, run.spec.env_id, run.spec.hyperparams_yaml), (study, run))
+    problems = []
+    with console.status(f"Checking {len(to_check)} settings (building each model once)"):
+        for study, run in to_check.values():
+            try:
+                check_run(run.spec)
+            except RunError as error:
+                where = f"variant {run.variant!r}" + ("" if run.reading == STATED else f" under reading {run.reading!r}")
+                problems.append(f"{study.path}: {where}: {error}")
+    return problems
 
 
 def studies_of(paths: Sequence[Path]) -> list[StudySpec]:

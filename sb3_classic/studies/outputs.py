@@ -167,7 +167,10 @@ def plot_study(results: StudyResults, path: Path) -> Path:
         axis.axhline(study.threshold, color="grey", linestyle=":", linewidth=1)
         axis.set_xlabel("Episode")
         axis.set_title(reading if len(readings) > 1 else study.env_id, fontsize=10)
-        axis.legend(fontsize=8, loc="best")
+        if axis.lines[:-1]:
+            axis.legend(fontsize=8, loc="best")
+        else:
+            axis.text(0.5, 0.5, "no run in the cache yet", transform=axis.transAxes, ha="center", color="grey")
         axis.grid(alpha=0.3)
     smooth = f", moving average of {study.smooth} episodes" if study.smooth > 1 else ""
     axes[0][0].set_ylabel("Training return")
@@ -237,6 +240,7 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         "reach it count as the episode budget, a lower bound).",
         "- Intervals: 95% bootstrap over seeds (`scipy.stats.bootstrap`, BCa); verdicts by the rule of "
         "[STUDIES.md](STUDIES.md).",
+        *_short_budget_notes(study),
         f"- Versions: {', '.join(f'{name} {version}' for name, version in code_versions(study.algo).items())}.",
         "",
         "## Claims",
@@ -295,7 +299,13 @@ Acrobot-v1; a seed that never does counts as the budget)."""
 
 
 def write_studies_index(
-    studies: Sequence[StudySpec], results_dir: Path, title: str = "Studies", program: str = PROGRAM, root: Path | None = None
+    studies: Sequence[StudySpec],
+    results_dir: Path,
+    title: str = "Studies",
+    program: str = PROGRAM,
+    root: Path | None = None,
+    extra: Sequence[str] = (),
+    reduced: bool = False,
 ) -> Path:
     """
     ``STUDIES.md``: one row per claim of ``studies`` and of every other study with results in ``results_dir``,
@@ -303,6 +313,8 @@ def write_studies_index(
 
     :param program: the module of the commands shown (``study_command``)
     :param root: the folder they run in (``study_command``)
+    :param extra: the options of the commands shown (``study_command``: a reduced run's budget)
+    :param reduced: whether ``results_dir`` holds reduced runs (their compute is counted, not the studies')
     :return: its path
     """
     records: dict[str, dict[str, Any]] = {}
@@ -315,12 +327,12 @@ def write_studies_index(
     for study in studies:
         listed.add(study.name)
         record = records.get(study.name)
-        command = study_command(study, program=program, root=root)
+        command = study_command(study, extra, program=program, root=root)
         rows += _claim_rows(study.name, study.source, [claim.text for claim in study.claims], record, command)
     for name, record in records.items():
         if name not in listed:
             rows += _claim_rows(name, record.get("source", ""), record["claim_texts"], record, record["command"])
-    done = [record for record in records.values() if not record.get("reduced")]
+    done = [record for record in records.values() if bool(record.get("reduced")) == reduced]
     # Each distinct run once: studies (and readings) that share settings share their runs
     run_seconds: dict[str, float] = {}
     for record in done:
@@ -335,11 +347,19 @@ def write_studies_index(
     lines = [
         f"# {title}",
         "",
-        f"{len(rows)} claims: {tally}.",
+        f"{len(rows)} {_plural(len(rows), 'claim', 'claims')}: {tally}.",
         "",
-        f"The studies listed: {len(planned)} runs, {len(set(planned))} distinct (runs of the same settings, in several "
-        "studies or readings, share their cache entry).",
-        f"Compute: {runs} distinct runs, {hours:.1f} CPU hours (`learn()` and the final evaluation, one core per run), "
+        f"The {len(studies)} {_plural(len(studies), 'study', 'studies')} of this command: {len(planned)} runs, "
+        f"{len(set(planned))} distinct (runs of the same settings, in several studies or readings, share their cache "
+        "entry)"
+        + (
+            f"; the table also lists the {len(records) - len(listed & set(records))} other studies with results "
+            "in this folder."
+            if set(records) - listed
+            else "."
+        ),
+        f"Compute: {runs} distinct {_plural(runs, 'run', 'runs')}, {hours:.1f} CPU hours (`learn()` and the final "
+        "evaluation, one core per run), "
         "summed over the studies' results in this folder, each run once (they may come from several invocations: the "
         "cache resumes).",
         "",
@@ -352,6 +372,29 @@ def write_studies_index(
     results_dir.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines))
     return path
+
+
+def _short_budget_notes(study: StudySpec) -> list[str]:
+    """:return: what a budget too short for a metric makes of it (a reduced run's, typically)"""
+    episodes = study.budget.episodes
+    if episodes is None:
+        return []
+    notes = []
+    if episodes <= stats.LAST_EPISODES:
+        notes.append(
+            f"- **{episodes} episodes per run**: the mean over the last {stats.LAST_EPISODES} episodes is the mean over "
+            "all of them."
+        )
+    if episodes < study.threshold_window:
+        notes.append(
+            f"- **{episodes} episodes per run**, fewer than the threshold's window of {study.threshold_window}: no seed "
+            f"can reach the threshold, and episodes to threshold is the budget for every seed."
+        )
+    return notes
+
+
+def _plural(count: int, one: str, many: str) -> str:
+    return one if count == 1 else many
 
 
 def _claim_rows(

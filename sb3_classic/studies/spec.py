@@ -33,7 +33,7 @@ import dataclasses
 import difflib
 import inspect
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -284,6 +284,21 @@ def algorithm_arguments(algo: str) -> set[str]:
     return set(inspect.signature(rl_zoo3.ALGOS[algo].__init__).parameters) - {"self", "env", "_init_setup_model"}
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, except that a key given twice in one mapping is an error (PyYAML keeps the last)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        seen: set[Any] = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if isinstance(key, Hashable) and key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"{key!r} is given twice in one mapping: keep one", key_node.start_mark
+                )
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
 class _Checker:
     """Collects the problems of a study file, each naming its field and the fix."""
 
@@ -292,7 +307,9 @@ class _Checker:
         self.problems: list[str] = []
 
     def fail(self, where: str, problem: str) -> None:
-        self.problems.append(f"{where}: {problem}")
+        message = f"{where}: {problem}"
+        if message not in self.problems:
+            self.problems.append(message)
 
     def raise_if_any(self) -> None:
         if self.problems:
@@ -352,7 +369,7 @@ def load_study(path: Path | str) -> StudySpec:
     path = Path(path)
     check = _Checker(path)
     try:
-        data = yaml.safe_load(path.read_text())
+        data = yaml.load(path.read_text(), Loader=_UniqueKeyLoader)  # a SafeLoader
     except (OSError, yaml.YAMLError) as error:
         raise StudyError(f"{path}: cannot be read as YAML: {error}") from error
     if not isinstance(data, Mapping):
@@ -460,11 +477,20 @@ def _seeds(check: _Checker, value: Any) -> tuple[int, ...]:
 
 
 def _budget(check: _Checker, value: Any) -> Budget | None:
-    if not isinstance(value, Mapping) or set(value) - {"episodes", "steps", "max_steps"}:
-        check.fail("budget", f"{value!r}: write {{episodes: 500}} or {{steps: 100000}} (max_steps caps episodes)")
+    fields = ("episodes", "steps", "max_steps")
+    if not isinstance(value, Mapping) or set(value) - set(fields):
+        unknown = sorted(set(value) - set(fields)) if isinstance(value, Mapping) else []
+        close = difflib.get_close_matches(str(unknown[0]), fields, n=1) if unknown else []
+        hint = f" ({unknown[0]!r}: did you mean {close[0]!r}?)" if close else ""
+        check.fail("budget", f"{value!r}{hint}: write {{episodes: 500}} or {{steps: 100000}} (max_steps caps episodes)")
         return None
     if ("episodes" in value) == ("steps" in value):
-        check.fail("budget", "give one of episodes (the seed report's: 500 while tuning, 1000 for final models) and steps")
+        both = "episodes" in value
+        check.fail(
+            "budget",
+            ("give episodes or steps, not both" if both else "give episodes or steps")
+            + " (the seed report's: 500 episodes while tuning, 1000 for final models)",
+        )
         return None
     if "steps" in value:
         if "max_steps" in value:
@@ -496,7 +522,7 @@ def _variants(check: _Checker, data: Mapping[str, Any], arguments: set[str], alg
             name = f"{key}={value}"
             if name in variants:
                 check.fail(f"vary.{key}", f"{value!r} appears twice")
-            variants[name] = check.hyperparams(f"vary.{key}", {key: value}, arguments, algo)
+            variants[name] = check.hyperparams("vary", {key: value}, arguments, algo)
         return variants
     raw = data["variants"]
     if not isinstance(raw, Mapping) or not raw:
@@ -579,17 +605,22 @@ def _claims(check: _Checker, data: Mapping[str, Any], variants: Mapping[str, Any
 
 
 def _claim(check: _Checker, where: str, item: Mapping[str, Any], variants: Mapping[str, Any], threshold: float) -> Claim:
-    unknown = set(item) - {"text", "kind", "variant", "others", "metric", "statistic", "margin", "value"}
-    if unknown:
-        check.fail(where, f"unknown keys {sorted(unknown)}")
+    fields = ("text", "kind", "variant", "others", "metric", "statistic", "margin", "value")
+    for key in sorted(set(item) - set(fields), key=str):
+        close = difflib.get_close_matches(str(key), fields, n=1)
+        check.fail(
+            f"{where}.{key}", "unknown field" + (f": did you mean {close[0]!r}?" if close else f"; known: {', '.join(fields)}")
+        )
     kind = item.get("kind")
     if kind not in CLAIM_KINDS:
         check.fail(f"{where}.kind", f"{kind!r}: choose one of {', '.join(CLAIM_KINDS)}")
     if not isinstance(item.get("text"), str) or not item["text"].strip():
-        check.fail(f"{where}.text", "the claim in one line, as its source makes it")
+        missing = "missing: " if "text" not in item else ""
+        check.fail(f"{where}.text", f"{missing}the claim in one line, as its source makes it")
     choices = ", ".join(map(repr, variants))
     variant = item.get("variant")
-    if variant not in variants:
+    # (without variants, their own error says what to write)
+    if variants and variant not in variants:
         check.fail(f"{where}.variant", f"{variant!r} is not a variant: choose one of {choices}")
     others = item.get("others", [])
     if isinstance(others, str):
@@ -598,7 +629,7 @@ def _claim(check: _Checker, where: str, item: Mapping[str, Any], variants: Mappi
         check.fail(f"{where}.others", f"{others!r}: a variant's name or a list of names, e.g. others: [n_steps=1]")
         others = []
     for other in others:
-        if other not in variants:
+        if variants and other not in variants:
             check.fail(f"{where}.others", f"{other!r} is not a variant: choose among {choices}")
     if kind in ("better", "similar") and not others:
         check.fail(f"{where}.others", f"a {kind!r} claim compares `variant` with `others`: name at least one")
