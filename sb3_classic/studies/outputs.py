@@ -349,7 +349,7 @@ def write_studies_index(
         "",
         f"{len(rows)} {_plural(len(rows), 'claim', 'claims')}: {tally}.",
         "",
-        f"The {len(studies)} {_plural(len(studies), 'study', 'studies')} of this command: {len(planned)} runs, "
+        f"Planned, for the {len(studies)} study {_plural(len(studies), 'file', 'files')} named: {len(planned)} runs, "
         f"{len(set(planned))} distinct (runs of the same settings, in several studies or readings, share their cache "
         "entry)"
         + (
