@@ -2,8 +2,11 @@
 
 import dataclasses
 import json
+import os
 import subprocess
 import sys
+import time
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +29,7 @@ from benchmarks.report import (
 from benchmarks.run import FULL, QUICK, main, make_specs, parse_budgets, parse_overrides
 from benchmarks.throughput import measure, throughput_ratios, throughput_table, time_breakdown_table
 from sb3_classic import NStepSARSA
-from sb3_classic.harness import runner
+from sb3_classic.harness import pool, runner
 from sb3_classic.harness.common import RunSpec, code_versions, register_algorithms
 from sb3_classic.harness.runner import RUN_FILE, episodes_from_monitors, run_one
 
@@ -411,3 +414,39 @@ def test_benchmark_set_needs_a_results_dir(capsys: pytest.CaptureFixture[str]) -
     with pytest.raises(SystemExit):
         main(["--set", "nstep_sarsa.max_grad_norm=10.0", "--skip-throughput"])
     assert "--set needs --results-dir" in capsys.readouterr().err
+
+
+def test_an_interruption_stops_the_running_runs_at_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # A Ctrl-C stops the pool: the runs not started are cancelled, and the running ones are stopped at once (not left
+    # to finish, minutes in a study), without the temporary folders they trained in
+    monkeypatch.setenv("TMPDIR", str(tmp_path))  # the spawned workers' temporary folders
+    yaml_entry = "learning_rate: 0.003\nn_timesteps: 10000000\npolicy: MlpPolicy\n"
+    long_run = dataclasses.replace(SPEC, n_timesteps=10**7, eval_freq=0, hyperparams_yaml=yaml_entry, label="long")
+    with pool.local_runs(1) as runs:
+        future = runs.submit(long_run)
+        deadline = time.monotonic() + 120
+        while not list(tmp_path.glob("sb3-classic-run-*")):
+            assert time.monotonic() < deadline, "the run did not start"
+            time.sleep(0.2)
+        workers = list(runs.pool._processes.values())
+        start = time.monotonic()
+        runs.cancel()
+        try:
+            for worker in workers:
+                while worker.exitcode is None and _process_exists(worker.pid):
+                    assert time.monotonic() - start < 30, "the running run was left to finish"
+                    time.sleep(0.1)
+        finally:
+            for worker in workers:
+                worker.kill()  # (if the assertion failed: else the pool's exit would wait for the run's end)
+    assert not future.done() or future.cancelled() or isinstance(future.exception(), BrokenProcessPool)
+    assert not list(tmp_path.glob("sb3-classic-run-*"))
+
+
+def _process_exists(pid: int | None) -> bool:
+    # (the pool's own thread may have reaped it: its Process object then never learns its exit code)
+    try:
+        os.kill(pid or 0, 0)
+    except ProcessLookupError:
+        return False
+    return True

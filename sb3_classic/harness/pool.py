@@ -14,7 +14,15 @@ from typing import Protocol
 
 from rich.console import Console
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TaskID, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.progress import (
+    BarColumn,
+    Progress,
+    TaskID,
+    TaskProgressColumn,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
 
 from sb3_classic.harness.common import RunSpec
 from sb3_classic.harness.runner import ClusterError, RunError, RunResult, init_worker, run_in_worker, store_failure, store_run
@@ -38,7 +46,7 @@ class Runs(Protocol):
         """:return: the future of ``spec``'s ``RunResult``"""
 
     def cancel(self) -> None:
-        """Cancel the runs not started."""
+        """Cancel the runs not started, and stop those running where it can."""
 
 
 class PoolRuns:
@@ -58,8 +66,18 @@ class PoolRuns:
         return self.pool.submit(run_in_worker, spec)
 
     def cancel(self) -> None:
-        """Cancel the runs not started."""
+        """Cancel the runs not started, and stop those running (the finished ones are cached already)."""
+        # Without stopping them, the pool's exit would wait for the running runs to end (minutes): a Ctrl-C reaches
+        # the workers no more (init_worker). Python 3.14 has ProcessPoolExecutor.terminate_workers; before, the
+        # processes are only in _processes, which shutdown() empties
+        terminate = getattr(self.pool, "terminate_workers", None)
+        if terminate is not None:
+            terminate()
+            return
+        processes = list((getattr(self.pool, "_processes", None) or {}).values())
         self.pool.shutdown(wait=False, cancel_futures=True)
+        for process in processes:
+            process.terminate()
 
 
 @contextmanager
@@ -110,9 +128,11 @@ def run_pending(
     if not specs:
         return []
     failed = []
-    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
+    # The bars are in env steps, or for a run with an episode budget in its share of its step cap (ProgressCallback): a
+    # percentage of the budget, not a count of steps
+    columns = (TextColumn("{task.description}"), BarColumn(), TaskProgressColumn(), TimeElapsedColumn(), TimeRemainingColumn())
     with open_runs(workers, scheduler, console) as runs, Progress(*columns, console=console) as progress:
-        overall = progress.add_task(f"{len(specs)} runs (env steps)", total=sum(spec.n_timesteps for spec in specs))
+        overall = progress.add_task(f"{len(specs)} runs", total=sum(spec.n_timesteps for spec in specs))
         futures: dict[Future[RunResult], RunSpec] = {runs.submit(spec): spec for spec in specs}
         by_name = {spec.name: spec for spec in specs}
         tasks: dict[str, TaskID] = {}

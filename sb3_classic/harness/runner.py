@@ -3,8 +3,10 @@
 import argparse
 import io
 import json
+import os
 import platform
 import shutil
+import signal
 import tempfile
 import time
 import traceback
@@ -42,6 +44,8 @@ class ProgressQueue(Protocol):
 
 #: The queue of a worker process of the pool (set by ``init_worker``)
 _worker_queue: ProgressQueue | None = None
+#: In a pool process, the temporary folder of the run it is running (removed if the run is stopped)
+_worker_scratch: str | None = None
 
 
 class TimedEvalCallback(EvalCallback):
@@ -206,7 +210,9 @@ def execute_run(spec: RunSpec, queue: ProgressQueue | None = None, host: str | N
     :raise RunError: if training failed (with the run's log)
     """
     host = host or platform.node()
+    global _worker_scratch
     with tempfile.TemporaryDirectory(prefix="sb3-classic-run-") as scratch:
+        _worker_scratch = scratch
         folder = Path(scratch)
         # The exact YAML entry of the key, for the zoo to read (the source YAML may be edited meanwhile)
         config = folder / "hyperparams.yml"
@@ -283,12 +289,24 @@ def store_failure(spec: RunSpec, cache_dir: Path, log: str) -> Path:
 
 def init_worker(queue: ProgressQueue) -> None:
     """
-    Initializer of the pool's processes: a multiprocessing queue reaches them at process start only.
+    Initializer of the pool's processes: a multiprocessing queue reaches them at process start only. A Ctrl-C is the
+    parent's to handle (it stops the pool: ``pool.PoolRuns.cancel``), and the SIGTERM it stops a run with unwinds the
+    run (its temporary folder removed) instead of killing the process where it stands.
 
     :param queue: where ``run_in_worker`` reports progress
     """
     global _worker_queue
     _worker_queue = queue
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _exit_on_sigterm)
+
+
+def _exit_on_sigterm(signum: int, frame: Any) -> None:
+    # At once (an exception would be the run's result, and the worker would take the next run), without the
+    # temporary folder of the run it stops
+    if _worker_scratch is not None:
+        shutil.rmtree(_worker_scratch, ignore_errors=True)
+    os._exit(128 + signum)
 
 
 def run_in_worker(spec: RunSpec) -> RunResult:
