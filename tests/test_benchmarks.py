@@ -1,17 +1,21 @@
 """The benchmark harness's own logic: threshold crossings, episode counts, cache keys, budgets, throughput, hot paths."""
 
+import contextlib
 import dataclasses
 import json
 import os
+import queue
 import subprocess
 import sys
 import time
+from concurrent.futures import Future
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from rich.console import Console
 
 from benchmarks import hot_paths
 from benchmarks.common import REPO_ROOT
@@ -450,3 +454,29 @@ def _process_exists(pid: int | None) -> bool:
     except ProcessLookupError:
         return False
     return True
+
+
+def test_run_names_are_shown_as_they_are(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A study's reading is in its runs' names in brackets, which rich would take for markup and drop
+    specs = [dataclasses.replace(SPEC, seed=seed, label=f"study a [reading] seed {seed}") for seed in (0, 1)]
+
+    class Runs:
+        progress: "queue.Queue[tuple[str, int]]" = queue.Queue()
+
+        def submit(self, spec: RunSpec) -> "Future[None]":
+            future: Future[None] = Future()
+            future.set_result(None) if spec.seed == 0 else future.set_exception(RuntimeError("boom"))
+            return future
+
+        def cancel(self) -> None:
+            pass
+
+    monkeypatch.setattr(pool, "open_runs", lambda *args: contextlib.nullcontext(Runs()))
+    monkeypatch.setattr(pool, "_store", lambda spec, future, cache_dir: None if future.exception() is None else "boom")
+    failed = pool.run_pending(specs, 1, tmp_path, Console(width=200))
+    output = capsys.readouterr().out
+    assert failed == specs[1:]
+    assert "done: study a [reading] seed 0" in output
+    assert "failed: study a [reading] seed 1: boom" in output

@@ -147,7 +147,7 @@ def run_pending(
             if name in finished:
                 progress.remove_task(tasks.pop(name))
             elif name not in tasks:
-                tasks[name] = progress.add_task(name, total=by_name[name].n_timesteps, completed=completed)
+                tasks[name] = progress.add_task(escape(name), total=by_name[name].n_timesteps, completed=completed)
             else:
                 progress.update(tasks[name], completed=completed)
 
@@ -171,10 +171,11 @@ def run_pending(
                         progress.advance(overall, spec.n_timesteps - steps[spec.name])
                     message = _store(spec, future, cache_dir)
                     if message is None:
-                        progress.console.print(f"done: {spec.name}")
+                        progress.console.print(f"done: {spec.name}", markup=False, highlight=False)
                     else:
                         failed.append(spec)
-                        progress.console.print(f"[red]failed: {spec.name}: {message}[/red]", markup=True, highlight=False)
+                        failure = f"[red]failed: {escape(spec.name)}: {message}[/red]"
+                        progress.console.print(failure, markup=True, highlight=False)
         except KeyboardInterrupt:
             runs.cancel()
             raise
