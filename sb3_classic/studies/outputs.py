@@ -224,7 +224,8 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
     if study.source:
         lines += [f"Source: {study.source}.", ""]
     if reduced:
-        lines += ["**Reduced run** (fewer seeds or a shorter budget than the study file's): not the study's result.", ""]
+        banner = "**Reduced run** (other seeds or another budget than the study file's: `--seeds`, `--episodes`, `--steps`)"
+        lines += [f"{banner}: not the study's result.", ""]
     lines += [
         "Produced by:",
         "",

@@ -273,7 +273,9 @@ def judge(claim: Claim, metrics: Mapping[str, Mapping[str, np.ndarray]]) -> Clai
                 assert claim.margin is not None
                 verdict = _similar(difference, claim.margin)
             comparisons.append(Comparison(other, difference, verdict))
-            parts.append(f"{claim.variant} − {other}: {_signed(difference)} ({verdict})")
+            # (each comparison's verdict where there are several: the claim's own is given beside it)
+            each = f" ({verdict})" if len(claim.others) > 1 else ""
+            parts.append(f"{claim.variant} − {other}: {_signed(difference)}{each}")
         verdicts = [comparison.verdict for comparison in comparisons]
         if all(verdict == SUPPORTED for verdict in verdicts):
             overall = SUPPORTED
