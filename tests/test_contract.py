@@ -320,7 +320,21 @@ INVALID_ARGUMENTS = [
     (NStepSARSA, dict(train_freq=(4, "step")), r"train_freq=\(4, 'step'\) must be an integer >= 1.*tuple form"),
     (NStepSARSA, dict(loss_function="l1"), "loss_function='l1' must be one of 'mse', 'huber'"),
     (NStepSARSA, dict(lr_decay_milestones=[300, -5]), r"lr_decay_milestones\[...\]=-5"),
+    (NStepSARSA, dict(lr_decay_milestones=300), r"lr_decay_milestones=300 must be a list of counts, e.g. \[300, 500\]"),
+    (
+        REINFORCE,
+        dict(lr_decay_factor=0.5),
+        "lr_decay_factor=0.5 has no effect without lr_decay_every .* or lr_decay_milestones",
+    ),
+    (REINFORCE, dict(policy_kwargs=dict(ortho_init=False)), "policy_kwargs: .*'ortho_init'.*weight_init='orthogonal'"),
+    (NStepSARSA, dict(policy_kwargs=dict(net_arch=dict(pi=[64], qf=[64]))), "takes a list of hidden layer sizes"),
 ]
+
+
+def test_numpy_numbers_are_accepted() -> None:
+    # What a sweep over np.arange / np.linspace passes
+    model = NStepSARSA("MlpPolicy", "CartPole-v1", n_steps=np.int64(5), gamma=np.float32(0.99), train_freq=np.int32(4))
+    assert (model.n_steps, model.train_freq) == (5, 4)
 
 
 @pytest.mark.parametrize(("model_class", "kwargs", "message"), INVALID_ARGUMENTS)
@@ -348,3 +362,12 @@ def test_cuda(model_class: type[Any], tmp_path: Path) -> None:
     loaded = model_class.load(tmp_path / "model.zip", device="cuda")
     obs = observations()
     np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0])
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_a_refused_env_leaves_the_model_as_it_was(model_class: type[Any]) -> None:
+    model = model_class("MlpPolicy", make_vec_env("CartPole-v1", n_envs=3), seed=0, **SMALL[model_class])
+    with pytest.raises(ValueError, match="Observation spaces do not match"):
+        model.set_env(make_vec_env("Acrobot-v1", n_envs=5))
+    assert model.n_envs == model.env.num_envs == model.rollout_buffer.n_envs == 3
+    model.learn(300, reset_num_timesteps=False)

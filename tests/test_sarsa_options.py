@@ -6,6 +6,7 @@ from typing import Any
 import numpy as np
 import pytest
 import torch as th
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from torch import nn
 
@@ -112,3 +113,32 @@ def test_layer_norm_after_every_hidden_layer(with_bias: bool) -> None:
     assert [layer.normalized_shape for layer in layers if isinstance(layer, nn.LayerNorm)] == [(32,), (16,)]
     assert all((layer.bias is not None) == with_bias for layer in layers if isinstance(layer, nn.Linear))
     model.learn(200)
+
+
+def test_a_second_learn_keeps_copying_the_bootstrap_network() -> None:
+    model = NStepSARSA("MlpPolicy", "CartPole-v1", target_update_interval=32, gradient_steps=1, seed=0)
+    model.learn(400)
+    first_copy = model._target_updated_at
+    assert first_copy > 300
+    # learn() resets num_timesteps (its default): the copies count from there, not from the first run's last copy
+    model.learn(300)
+    assert 0 < model._target_updated_at <= model.num_timesteps
+    assert model.num_timesteps - model._target_updated_at < 32 + model.train_freq
+
+
+def test_a_linear_epsilon_restarts_with_each_learn_from_its_first_step() -> None:
+    model = NStepSARSA(
+        "MlpPolicy", "CartPole-v1", exploration_schedule="linear", exploration_fraction=0.5, train_freq=16, seed=0
+    )
+    model.learn(400)
+    assert model.exploration_rate == pytest.approx(model.exploration_final_eps)
+    seen: list[float] = []
+
+    class FirstSteps(BaseCallback):
+        def _on_step(self) -> bool:
+            seen.append(self.model.exploration_rate)  # type: ignore[attr-defined]
+            return True
+
+    model.learn(400, callback=FirstSteps())
+    # The whole first rollout (16 steps) of the second call explores as the first call started, as SB3's DQN
+    assert seen[:16] == [model.exploration_initial_eps] * 16

@@ -113,3 +113,52 @@ def test_linear_epsilon_follows_progress_like_dqn() -> None:
     model._setup_model()
     model.learn(100)
     assert model.exploration_rate == pytest.approx(0.1)
+
+
+def test_an_episode_step_decay_steps_after_each_episodes_updates_as_steplr() -> None:
+    # StepLR(step_size=2) stepped after each episode: episodes 1-2 at lr, 3-4 at lr/2, 5-6 at lr/4
+    model = REINFORCE("MlpPolicy", "CartPole-v1", learning_rate=1.0, lr_decay_every=2, lr_decay_factor=0.5, seed=0)
+    used: list[float] = []
+    train = model.train
+
+    def recording_train() -> None:
+        train()
+        used.append(model.policy.optimizer.param_groups[0]["lr"])
+
+    model.train = recording_train  # type: ignore[method-assign]
+    model.learn(400)
+    assert model._completed_episodes >= 6
+    assert used[:6] == [1.0, 1.0, 0.5, 0.5, 0.25, 0.25]
+
+
+def test_sarsa_per_step_decay_counts_the_episodes_before_each_step() -> None:
+    # The updates of an episode's last steps (the last n at its end) still use its learning rate; the next episode's
+    # first update is decayed
+    model = NStepSARSA(
+        "MlpPolicy",
+        "CartPole-v1",
+        learning_rate=1.0,
+        n_steps=3,
+        train_freq=1,
+        gradient_steps=1,
+        update_mode="per_step",
+        lr_decay_every=1,
+        lr_decay_factor=0.5,
+        seed=0,
+    )
+    used: list[tuple[int, float]] = []
+    train = model.train
+
+    def recording_train() -> None:
+        before = model._episodes_before_rollout
+        train()
+        used.append((before, model.policy.optimizer.param_groups[0]["lr"]))
+
+    model.train = recording_train  # type: ignore[method-assign]
+    model.learn(100)
+    assert model._completed_episodes >= 2
+    for episodes_before, lr in used:
+        assert lr == 0.5**episodes_before
+    # The step that ended the first episode trained with the undecayed rate
+    first_end = next(index for index, (episodes_before, _) in enumerate(used) if episodes_before == 1) - 1
+    assert used[first_end] == (0, 1.0)

@@ -1,5 +1,6 @@
 """The base class of sb3_classic's algorithms: SB3's on-policy loop around a buffer that keeps whole trajectories."""
 
+import inspect
 import math
 import warnings
 from abc import abstractmethod
@@ -13,7 +14,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.common.utils import obs_as_tensor, update_learning_rate
+from stable_baselines3.common.utils import check_for_correct_spaces, obs_as_tensor, update_learning_rate
 from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_classic.common.buffers import Observations, TrajectoryBuffer, all_finite, non_finite_entries, select
@@ -22,6 +23,16 @@ from sb3_classic.common.schedules import StepDecay
 from sb3_classic.common.utils import check_choice, check_learning_rate, check_positive_int, check_range
 
 SelfClassicOnPolicyAlgorithm = TypeVar("SelfClassicOnPolicyAlgorithm", bound="ClassicOnPolicyAlgorithm")
+#: The policy's arguments the algorithm passes itself (not ``policy_kwargs``)
+_POLICY_ARGUMENTS = {
+    "self",
+    "observation_space",
+    "action_space",
+    "lr_schedule",
+    "value_lr_schedule",
+    "use_baseline",
+    "target_network",
+}
 
 
 class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
@@ -130,6 +141,9 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         self.max_episode_length = max_episode_length
         # Training state the count-driven schedules follow; unlike num_timesteps, learn() never resets it
         self._completed_episodes = 0
+        # The episodes completed before the current rollout: an update's learning-rate decay counts those, as
+        # PyTorch's StepLR stepped after each episode's updates (the episodes ending in the rollout decay the next one)
+        self._episodes_before_rollout = 0
         if self.env is not None and not isinstance(self.action_space, supported_action_spaces):
             raise ValueError(self._unsupported_action_space_message(supported_action_spaces))
 
@@ -153,8 +167,18 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
             if self.lr_decay_milestones is not None:
                 raise ValueError("Pass lr_decay_every or lr_decay_milestones, not both")
         if self.lr_decay_milestones is not None:
+            if isinstance(self.lr_decay_milestones, (str, bytes)) or not isinstance(self.lr_decay_milestones, Sequence):
+                raise TypeError(
+                    f"lr_decay_milestones={self.lr_decay_milestones!r} must be a list of counts, e.g. [300, 500] (one "
+                    "milestone: [300]); for a decay every k, pass lr_decay_every=k"
+                )
             for milestone in self.lr_decay_milestones:
                 check_positive_int("lr_decay_milestones[...]", milestone)
+        if self.lr_decay_factor != 1.0 and self.lr_decay_every is None and self.lr_decay_milestones is None:
+            raise ValueError(
+                f"lr_decay_factor={self.lr_decay_factor!r} has no effect without lr_decay_every (a decay every k "
+                "episodes or updates, like StepLR) or lr_decay_milestones (like MultiStepLR): pass one of them"
+            )
         if self.max_episode_length is not None:
             check_positive_int("max_episode_length", self.max_episode_length, hint="or None for no cap")
 
@@ -173,7 +197,21 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         self._action_offset = action_offset(self.action_space)
         self.set_random_seed(self.seed)
         self._make_buffer()
-        self.policy = self._make_policy().to(self.device)
+        try:
+            policy = self._make_policy()
+        except TypeError as error:
+            if "unexpected keyword argument" not in str(error):
+                raise
+            raise TypeError(f"policy_kwargs: {error}. {self._policy_kwargs_hint()}") from error
+        self.policy = policy.to(self.device)
+
+    def _policy_kwargs_hint(self) -> str:
+        """:return: what ``policy_kwargs`` takes, for the error of an unknown key"""
+        parameters = [name for name in inspect.signature(self.policy_class).parameters if name not in _POLICY_ARGUMENTS]
+        return (
+            f"{type(self).__name__}'s policy takes {', '.join(parameters)} "
+            "(A2C/PPO's ortho_init is weight_init='orthogonal' here, or weight_init='default' for PyTorch's)"
+        )
 
     def _make_buffer(self) -> None:
         self.rollout_buffer = TrajectoryBuffer(
@@ -195,7 +233,9 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         self._current_progress_remaining = min(1.0, max(0.0, 1.0 - float(num_timesteps) / float(total_timesteps)))
 
     def _lr_decay_count(self) -> int:
-        return self._completed_episodes if self.lr_decay_unit == "episode" else self._n_updates
+        # (a model saved before this attribute existed: the episodes completed)
+        episodes = getattr(self, "_episodes_before_rollout", self._completed_episodes)
+        return episodes if self.lr_decay_unit == "episode" else self._n_updates
 
     def _update_learning_rates(self, schedules: Sequence[tuple[th.optim.Optimizer, Schedule, str]]) -> None:
         """
@@ -349,6 +389,7 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         """
         assert self._last_obs is not None, "No previous observation was provided"
         self.policy.set_training_mode(False)
+        self._episodes_before_rollout = self._completed_episodes
         callback.on_rollout_start()
         n_steps, n_episodes = 0, 0
         while True:
@@ -444,6 +485,8 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         )
         if not all_finite(self._last_obs):  # type: ignore[arg-type]
             self._raise_non_finite(self._last_obs, "observation", "the first observation after the reset")  # type: ignore[arg-type]
+        # The progress of this learn() call from its first step (the schedules the rollout reads: a linear ε)
+        self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
         return total_timesteps, callback
 
     def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
@@ -455,6 +498,8 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         :param force_reset: reset the envs before training (required when the number of envs changes)
         """
         env = self._wrap_env(env, self.verbose)
+        # Before anything changes: a model whose env was refused keeps its envs and buffer
+        check_for_correct_spaces(env, self.observation_space, self.action_space)
         if env.num_envs != self.n_envs:
             if not force_reset:
                 raise ValueError(

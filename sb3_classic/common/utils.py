@@ -1,5 +1,6 @@
 """Argument checks shared by the algorithms: each error names the argument, the value and what to pass instead."""
 
+import numbers
 from collections.abc import Sequence
 from typing import Any
 
@@ -29,7 +30,9 @@ def check_range(name: str, value: Any, low: float, high: float, *, low_open: boo
     :param low_open: exclude ``low`` itself
     :param hint: what to pass instead, appended to the message
     """
-    ok = isinstance(value, (int, float)) and (low < value if low_open else low <= value) and value <= high
+    # Any real number (NumPy's included), not a bool
+    number = isinstance(value, numbers.Real) and not isinstance(value, bool)
+    ok = number and (low < value if low_open else low <= value) and value <= high
     if not ok:
         interval = f"{'(' if low_open else '['}{low}, {high}]"
         raise ValueError(f"{name}={value!r} must be a number in {interval}{'. ' + hint if hint else ''}")
@@ -41,7 +44,8 @@ def check_positive_int(name: str, value: Any, hint: str = "") -> None:
     :param value: the value to check
     :param hint: what to pass instead, appended to the message
     """
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+    # Any integer (NumPy's included), not a bool
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
         raise ValueError(f"{name}={value!r} must be an integer >= 1{'. ' + hint if hint else ''}")
 
 

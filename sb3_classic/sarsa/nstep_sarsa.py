@@ -5,6 +5,7 @@ import numpy as np
 import torch as th
 import torch.nn.functional as F
 from gymnasium import spaces
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor, polyak_update
@@ -91,8 +92,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         each ``learn()`` call (SB3's DQN)
     :param exploration_initial_eps: initial ε
     :param exploration_final_eps: final ε (the floor of the exponential decay)
-    :param exploration_fraction: fraction of training over which the linear decay runs
-    :param exploration_decay_rate: per-episode factor of the exponential decay
+    :param exploration_fraction: fraction of training over which the linear decay runs (``"linear"`` only)
+    :param exploration_decay_rate: per-episode factor of the exponential decay (``"exponential"`` only)
     :param target_update_interval: bootstrap from a copy of q̂ (``policy.q_net_target``) moved towards q̂ every this
         many env steps (all envs together), by ``tau``; None bootstraps from q̂ itself, as the book does
     :param tau: the soft update coefficient of the copy ("Polyak update", between 0 and 1; 1 copies q̂)
@@ -466,6 +467,23 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self.logger.record("train/q_mean", q_mean_value)
         self.logger.record("train/target_mean", target_mean)
         self.logger.record("train/n_transitions", len(batch.targets))
+
+    def _setup_learn(
+        self,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        reset_num_timesteps: bool = True,
+        tb_log_name: str = "run",
+        progress_bar: bool = False,
+    ) -> tuple[int, BaseCallback]:
+        total_timesteps, callback = super()._setup_learn(
+            total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar
+        )
+        # num_timesteps may have been reset: the bootstrap network's next copy counts from here
+        self._target_updated_at = min(self._target_updated_at, self.num_timesteps)
+        # A linear ε restarts with this learn() call from its first step (SB3's DQN), not after the first rollout
+        self._update_exploration_rate()
+        return total_timesteps, callback
 
     def _excluded_save_params(self) -> list[str]:
         # A cache of the rollout loop's last forward pass, not training state

@@ -91,6 +91,11 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             optimizer_kwargs=optimizer_kwargs,
             normalize_images=normalize_images,
         )
+        if isinstance(net_arch, dict):
+            raise ValueError(
+                f"net_arch={net_arch!r}: the Q-network of NStepSARSA takes a list of hidden layer sizes, e.g. [64, 64] "
+                "(dict(pi=..., vf=...) / dict(pi=..., qf=...) are for actor-critic methods)"
+            )
         if net_arch is None:
             net_arch = [] if features_extractor_class == NatureCNN else [64, 64]
         self.net_arch = net_arch
