@@ -412,7 +412,7 @@ def _claim_rows(
         measured = stated[0]["measured"]
         others = [f"{claim['reading']}: {claim['verdict']}" for claim in judged if claim["reading"] != STATED]
         if others:
-            measured += " Other readings: " + "; ".join(others) + "."
+            measured = measured.rstrip(".") + ". Other readings: " + "; ".join(others) + "."
         if not record.get("complete", True):
             verdict += f" (partial: {record['missing_runs']} runs missing)"
         if record.get("reduced"):
