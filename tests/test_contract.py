@@ -333,7 +333,8 @@ INVALID_ARGUMENTS = [
 
 def test_numpy_numbers_are_accepted() -> None:
     # What a sweep over np.arange / np.linspace passes
-    model = NStepSARSA("MlpPolicy", "CartPole-v1", n_steps=np.int64(5), gamma=np.float32(0.99), train_freq=np.int32(4))
+    numbers: dict[str, Any] = dict(n_steps=np.int64(5), gamma=np.float32(0.99), train_freq=np.int32(4))
+    model = NStepSARSA("MlpPolicy", "CartPole-v1", **numbers)
     assert (model.n_steps, model.train_freq) == (5, 4)
 
 

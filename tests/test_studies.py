@@ -11,6 +11,7 @@ import shlex
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -456,7 +457,7 @@ def test_the_compute_counts_each_shared_run_once(tmp_path: Path) -> None:
     # is that of the distinct runs; a study's own table still counts all of its runs
     def record(name: str, run_seconds: dict[str, float]) -> None:
         claim = {"text": "a beats b", "reading": STATED, "verdict": stats.SUPPORTED, "measured": "+1"}
-        content = {"study": name, "title": name, "source": name, "command": f"python -m x {name}.yml", "claims": [claim]}
+        content: dict[str, Any] = {"study": name, "title": name, "source": name, "command": f"x {name}.yml", "claims": [claim]}
         content |= {"claim_texts": ["a beats b"], "runs": len(run_seconds), "run_seconds": run_seconds}
         (tmp_path / f"{name}.json").write_text(json.dumps(content))
 
