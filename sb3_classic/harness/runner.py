@@ -214,12 +214,8 @@ def execute_run(spec: RunSpec, queue: ProgressQueue | None = None, host: str | N
     with tempfile.TemporaryDirectory(prefix="sb3-classic-run-") as scratch:
         _worker_scratch = scratch
         folder = Path(scratch)
-        # The exact YAML entry of the key, for the zoo to read (the source YAML may be edited meanwhile)
-        config = folder / "hyperparams.yml"
-        config.write_text(yaml.safe_dump({spec.env_id: spec.hyperparams}, sort_keys=True))
-
+        config = _write_config(spec, folder)
         th.set_num_threads(1)
-        register_algorithms()
         with open(folder / "train.log", "w") as log:
             try:
                 with redirect_stdout(log), redirect_stderr(log):
@@ -325,9 +321,7 @@ def check_run(spec: RunSpec) -> None:
     """
     with tempfile.TemporaryDirectory(prefix="sb3-classic-check-") as scratch:
         folder = Path(scratch)
-        config = folder / "hyperparams.yml"
-        config.write_text(yaml.safe_dump({spec.env_id: spec.hyperparams}, sort_keys=True))
-        register_algorithms()
+        config = _write_config(spec, folder)
         log = io.StringIO()
         try:
             with redirect_stdout(log), redirect_stderr(log):
@@ -338,6 +332,14 @@ def check_run(spec: RunSpec) -> None:
                 model.env.close()
         except Exception as error:
             raise RunError(f"{type(error).__name__}: {error}", log.getvalue() + traceback.format_exc()) from error
+
+
+def _write_config(spec: RunSpec, folder: Path) -> Path:
+    """:return: the zoo YAML of the run's exact entry (the source YAML may be edited meanwhile), written in ``folder``"""
+    register_algorithms()
+    config = folder / "hyperparams.yml"
+    config.write_text(yaml.safe_dump({spec.env_id: spec.hyperparams}, sort_keys=True))
+    return config
 
 
 def _experiment_manager(spec: RunSpec, folder: Path, config: Path) -> ExperimentManager:

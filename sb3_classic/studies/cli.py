@@ -17,7 +17,7 @@ from rich.markup import escape
 
 from sb3_classic.harness.pool import report_missing, run_missing_runs
 from sb3_classic.harness.runner import RUN_FILE, RunError, check_run
-from sb3_classic.studies.outputs import PROGRAM, load_study_results, study_command, write_studies_index, write_study
+from sb3_classic.studies.outputs import PROGRAM, load_study_results, plural, study_command, write_studies_index, write_study
 from sb3_classic.studies.spec import STATED, StudyError, StudyRun, StudySpec, load_study
 
 #: Where reduced runs (--seeds, --episodes, --steps) write their outputs, inside the cache: they are not the study's
@@ -137,7 +137,7 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
             cached = sum((run.spec.run_dir(args.cache_dir) / RUN_FILE).exists() for run in study_runs)
             console.print(
                 f"{study.name}: {len(study.variants)} variants × {len(study.readings)} "
-                f"{'reading' if len(study.readings) == 1 else 'readings'} × {len(study.seeds)} seeds, "
+                f"{plural(len(study.readings), 'reading', 'readings')} × {len(study.seeds)} seeds, "
                 f"{study.budget.describe()}: {len(study_runs)} runs, {cached} cached",
                 highlight=False,
             )

@@ -348,9 +348,9 @@ def write_studies_index(
     lines = [
         f"# {title}",
         "",
-        f"{len(rows)} {_plural(len(rows), 'claim', 'claims')}: {tally}.",
+        f"{len(rows)} {plural(len(rows), 'claim', 'claims')}: {tally}.",
         "",
-        f"Planned, for the {len(studies)} study {_plural(len(studies), 'file', 'files')} named: {len(planned)} runs, "
+        f"Planned, for the {len(studies)} study {plural(len(studies), 'file', 'files')} named: {len(planned)} runs, "
         f"{len(set(planned))} distinct (runs of the same settings, in several studies or readings, share their cache "
         "entry)"
         + (
@@ -359,7 +359,7 @@ def write_studies_index(
             if set(records) - listed
             else "."
         ),
-        f"Compute: {runs} distinct {_plural(runs, 'run', 'runs')}, {hours:.1f} CPU hours (`learn()` and the final "
+        f"Compute: {runs} distinct {plural(runs, 'run', 'runs')}, {hours:.1f} CPU hours (`learn()` and the final "
         "evaluation, one core per run), "
         "summed over the studies' results in this folder, each run once (they may come from several invocations: the "
         "cache resumes).",
@@ -394,7 +394,8 @@ def _short_budget_notes(study: StudySpec) -> list[str]:
     return notes
 
 
-def _plural(count: int, one: str, many: str) -> str:
+def plural(count: int, one: str, many: str) -> str:
+    """:return: ``one`` for a count of 1, else ``many``"""
     return one if count == 1 else many
 
 
