@@ -138,6 +138,44 @@ def test_per_step_nstep_sarsa_is_the_books(n: int) -> None:
     assert np.abs(expected - w0).max() > 1e-2
 
 
+@pytest.mark.parametrize(
+    "kwargs",
+    [dict(n_steps=1), dict(n_steps=3, expected_sarsa=True), dict(n_steps=2, exploration_schedule="linear")],
+    ids=["n=1", "n=3 expected", "n=2 linear eps"],
+)
+def test_the_book_loops_update_is_train_to_the_last_bit(kwargs: dict[str, Any], monkeypatch: pytest.MonkeyPatch) -> None:
+    """
+    The per-step loop's own update between episode ends (``_book_loop_step``, issue 12's speed) against the general
+    ``train()`` it stands for: a 2×32 MLP with Adam and time-limit truncations (CartPole cut at 30 steps), the same
+    parameters bit for bit and the same log.
+    """
+
+    def run() -> tuple[list[th.Tensor], dict[str, Any]]:
+        env = DummyVecEnv([lambda: gym.make("CartPole-v1", max_episode_steps=30)])
+        model = NStepSARSA(
+            "MlpPolicy", env, train_freq=1, gradient_steps=1, update_mode="per_step", exploration_initial_eps=0.3,
+            policy_kwargs=dict(net_arch=[32, 32]), seed=5, device="cpu", **kwargs,
+        )  # fmt: skip
+        model.learn(600)
+        return [p.detach().clone() for p in model.policy.parameters()], dict(model.logger.name_to_value)
+
+    calls = {True: 0, False: 0}
+    book_step = NStepSARSA._book_loop_step
+
+    def counted(self: NStepSARSA) -> bool:
+        done = book_step(self)
+        calls[done] += 1
+        return done
+
+    monkeypatch.setattr(NStepSARSA, "_book_loop_step", counted)
+    fast, fast_log = run()
+    assert calls[True] > 300, "the book loop's update must be the one taken between episode ends"
+    monkeypatch.setattr(NStepSARSA, "_book_loop_step", lambda self: False)
+    general, general_log = run()
+    assert all(th.equal(a, b) for a, b in zip(fast, general, strict=True))
+    assert fast_log == general_log
+
+
 def test_batch_mode_differs_from_the_book_at_episode_ends() -> None:
     """The batch mean gives each of the last n transitions α/n: the reason the per-step mode exists."""
     results = {}

@@ -93,11 +93,19 @@ def assert_same_rows(actual: list[np.ndarray], expected: list[np.ndarray]) -> No
 
 
 @pytest.mark.parametrize(
-    ("n_steps", "train_freq", "n_envs", "expected_sarsa"),
-    [(4, 3, 3, False), (1, 1, 1, False), (6, 2, 2, True), (3, 10, 2, False)],
+    ("n_steps", "train_freq", "n_envs", "expected_sarsa", "update_mode"),
+    [
+        (4, 3, 3, False, "batch"),
+        (1, 1, 1, False, "batch"),
+        (6, 2, 2, True, "batch"),
+        (3, 10, 2, False, "batch"),
+        # One env, an update every step: the book's loop, whose batches are built without the whole-buffer arrays
+        (4, 1, 1, True, "per_step"),
+        (3, 1, 1, False, "per_step"),
+    ],
 )
 def test_sarsa_trains_every_transition_once_on_its_full_nstep_target(
-    n_steps: int, train_freq: int, n_envs: int, expected_sarsa: bool
+    n_steps: int, train_freq: int, n_envs: int, expected_sarsa: bool, update_mode: str
 ) -> None:
     epsilon, gamma = 0.3, 0.9
     model = NStepSARSA(
@@ -105,6 +113,7 @@ def test_sarsa_trains_every_transition_once_on_its_full_nstep_target(
         short_cartpole_env(n_envs, seed=1),
         n_steps=n_steps,
         train_freq=train_freq,
+        update_mode=update_mode,
         gamma=gamma,
         expected_sarsa=expected_sarsa,
         exploration_initial_eps=epsilon,

@@ -32,14 +32,15 @@ class TrainingBatch(NamedTuple):
     """
     The transitions of one update, as tensors, with what they are trained towards.
 
-    ``trained`` locates them in the buffer's ``get()`` arrays, to mark them trained after the update.
+    ``trained`` locates them in the buffer's ``get()`` arrays (a mask, or with one env a count of its first pending
+    transitions), to mark them trained after the update.
     """
 
     observations: th.Tensor | dict[str, th.Tensor]
     actions: th.Tensor
     targets: th.Tensor
     episode_steps: th.Tensor
-    trained: np.ndarray
+    trained: np.ndarray | int
 
 
 def select(observations: Observations, index: Any) -> Observations:
@@ -209,19 +210,25 @@ class TrajectoryBuffer(BaseBuffer):
             pending=np.arange(self.pos)[:, None] >= self.start,
         )
 
-    def mark_trained(self, trained: np.ndarray) -> None:
+    def mark_trained(self, trained: np.ndarray | int) -> None:
         """
         Record that the algorithm trained on ``trained`` (a prefix of each env's pending transitions) and drop
         the rows that no env needs any more.
 
-        :param trained: boolean mask of shape (pos, n_envs)
+        :param trained: boolean mask of shape (pos, n_envs); with one env, the number of its first pending
+            transitions will do (no mask to build and check: the per-step mode calls this every env step)
         """
-        start = self.start + np.count_nonzero(trained, axis=0)
-        rows = np.arange(self.pos)[:, None]
-        assert (trained == ((rows >= self.start) & (rows < start))).all(), (
-            "trained must be the first pending transitions of each env (each once, in time order)"
-        )
-        self.start = start
+        if isinstance(trained, int):
+            assert self.n_envs == 1, "a count of trained transitions needs one env (a mask otherwise)"
+            assert self.start[0] + trained <= self.pos, "trained: more transitions than pending"
+            self.start += trained
+        else:
+            start = self.start + np.count_nonzero(trained, axis=0)
+            rows = np.arange(self.pos)[:, None]
+            assert (trained == ((rows >= self.start) & (rows < start))).all(), (
+                "trained must be the first pending transitions of each env (each once, in time order)"
+            )
+            self.start = start
         self._drop_rows(int(self.start.min()))
 
     def _drop_rows(self, n_rows: int) -> None:

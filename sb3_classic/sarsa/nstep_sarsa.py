@@ -10,7 +10,7 @@ from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor, polyak_update
 
-from sb3_classic.common.buffers import TrainingBatch, TrajectorySamples, select
+from sb3_classic.common.buffers import TrainingBatch, select
 from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
 from sb3_classic.common.returns import (
     epsilon_greedy_expectation,
@@ -318,69 +318,106 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         :return: every transition not trained on yet whose n-step target G_{t:t+n} is known, with that target, in
             time order (None if there is none yet)
         """
+        if self.n_envs == 1 and self.train_freq == 1:
+            return self._book_loop_batch()
         data = self.rollout_buffer.get()
         # G_{t:t+n} (S&B eq. 10.4) = the window's rewards + γ^K × its bootstrap value
-        if self.n_envs == 1 and self.train_freq == 1:
-            # The book's loop (one env, an update every step): one or a few windows per update, each computed alone
-            # (nstep_window: the same bits as nstep_windows, without its cost of n × the steps held per update)
-            start = int(self.rollout_buffer.start[0])
+        all_windows = nstep_windows(data.rewards, data.dones, self.gamma, self.n_steps)
+        trained = all_windows.complete & data.pending
+        if not trained.any():
+            return None
+        rows, envs = np.nonzero(trained)  # row-major: time order
+        stop_rows = all_windows.stop_rows[rows, envs]
+        reward_sums = all_windows.reward_sums[rows, envs]
+        bootstrap_discounts = all_windows.bootstrap_discounts[rows, envs]
+        return self._batch_with_targets(rows, envs, stop_rows, reward_sums, bootstrap_discounts, trained)
+
+    def _book_loop_batch(self) -> TrainingBatch | None:
+        """
+        ``_training_batch`` for the book's loop (one env, an update every step): the same batch to the last bit,
+        without the whole-buffer arrays of the general case, which cost more than the gradient step's own overhead
+        when they run every env step (issue 12). One or a few windows per update, each computed alone
+        (``nstep_window``: the same bits as ``nstep_windows``, without its cost of n × the steps held).
+        """
+        buffer = self.rollout_buffer
+        start, pos = int(buffer.start[0]), buffer.pos
+        rewards, dones = buffer.rewards[:pos, 0], buffer.dones[:pos, 0]
+        discounts = gamma_powers(self.gamma, self.n_steps)
+        if dones[start:pos].any():
+            # An episode ended: the pending transitions up to it complete together (the complete targets are a prefix)
             windows = []
-            discounts = gamma_powers(self.gamma, self.n_steps)
-            for t in range(start, len(data.rewards)):
-                window = nstep_window(data.rewards[:, 0], data.dones[:, 0], t, discounts, self.n_steps)
+            for t in range(start, pos):
+                window = nstep_window(rewards, dones, t, discounts, self.n_steps)
                 if not window.complete:
-                    break  # and so are the later ones: the complete targets are a prefix of the pending transitions
+                    break
                 windows.append(window)
-            if not windows:
-                return None
-            rows = np.arange(start, start + len(windows))
-            envs = np.zeros(len(windows), dtype=np.int64)
-            trained = np.zeros(data.rewards.shape, dtype=bool)
-            trained[rows, 0] = True
-            stop_rows = np.array([window.stop_row for window in windows])
-            reward_sums = np.array([window.reward_sum for window in windows], dtype=np.float32)
-            bootstrap_discounts = np.array([window.bootstrap_discount for window in windows], dtype=np.float32)
         else:
-            all_windows = nstep_windows(data.rewards, data.dones, self.gamma, self.n_steps)
-            trained = all_windows.complete & data.pending
-            if not trained.any():
-                return None
-            rows, envs = np.nonzero(trained)  # row-major: time order
-            stop_rows = all_windows.stop_rows[rows, envs]
-            reward_sums = all_windows.reward_sums[rows, envs]
-            bootstrap_discounts = all_windows.bootstrap_discounts[rows, envs]
+            # Without an episode end, G_{t:t+n} is known once step t+n has been taken (S_{t+n}, A_{t+n} stored)
+            windows = [nstep_window(rewards, dones, t, discounts, self.n_steps) for t in range(start, pos - self.n_steps)]
+        if not windows:
+            return None
+        rows = np.arange(start, start + len(windows))
+        stop_rows = np.array([window.stop_row for window in windows])
+        reward_sums = np.array([window.reward_sum for window in windows], dtype=np.float32)
+        bootstrap_discounts = np.array([window.bootstrap_discount for window in windows], dtype=np.float32)
+        return self._batch_with_targets(
+            rows, np.zeros(len(windows), dtype=np.int64), stop_rows, reward_sums, bootstrap_discounts, len(windows)
+        )
+
+    def _batch_with_targets(
+        self,
+        rows: np.ndarray,
+        envs: np.ndarray,
+        stop_rows: np.ndarray,
+        reward_sums: np.ndarray,
+        bootstrap_discounts: np.ndarray,
+        trained: np.ndarray | int,
+    ) -> TrainingBatch:
+        """
+        :param rows: the buffer rows of the transitions to train on, in time order
+        :param envs: their envs
+        :param stop_rows: the row of each one's window's last reward
+        :param reward_sums: R_{t+1} + γR_{t+2} + … over each window, float32
+        :param bootstrap_discounts: γ^K for each window of K rewards, float32
+        :param trained: what to pass to the buffer's ``mark_trained`` after the update
+        :return: the transitions with their targets G_{t:t+n} (S&B eq. 10.4)
+        """
+        buffer = self.rollout_buffer
+        pos = buffer.pos
         bootstrap = np.zeros(len(rows), dtype=np.float32)
         # Semi-gradient: the bootstrap values come from the current weights, without gradient, and only where a
         # target needs one: no bootstrap past a termination, the final state's after a truncation
-        continuing = ~data.dones[stop_rows, envs]
-        truncated = data.truncated[stop_rows, envs]
+        continuing = ~buffer.dones[stop_rows, envs]
+        truncated = buffer.truncated[stop_rows, envs]
         if continuing.any():
-            bootstrap[continuing] = self._next_state_values(data, stop_rows[continuing] + 1, envs[continuing])
+            bootstrap[continuing] = self._next_state_values(stop_rows[continuing] + 1, envs[continuing])
         if truncated.any():
             # Every truncation in the buffer in one forward pass, as the rollout stored them (a batch of other rows
             # could round q̂ differently in the last bit: seeded runs would not repeat)
-            final_obs = obs_as_tensor(select(data.final_observations, data.truncated), self.device)
-            final_values = np.zeros_like(data.rewards)
+            truncations = buffer.truncated[:pos]
+            final_obs = obs_as_tensor(select(select(buffer.final_observations, slice(0, pos)), truncations), self.device)
+            final_values = np.zeros(truncations.shape, dtype=np.float32)
             with th.no_grad():
-                final_values[data.truncated] = self._bootstrap_values(self.policy.bootstrap_net(final_obs))
+                final_values[truncations] = self._bootstrap_values(self.policy.bootstrap_net(final_obs))
             bootstrap[truncated] = final_values[stop_rows[truncated], envs[truncated]]
+        # G_{t:t+n} = R_{t+1} + … + γ^{K−1}R_{t+K} + γ^K × the bootstrap value (S&B eq. 10.4), float32
         targets = reward_sums + bootstrap_discounts * bootstrap
         return TrainingBatch(
-            observations=obs_as_tensor(select(data.observations, (rows, envs)), self.device),
-            actions=th.as_tensor(data.actions[rows, envs].reshape(-1, 1), device=self.device),
+            observations=obs_as_tensor(select(buffer.observations, (rows, envs)), self.device),
+            actions=th.as_tensor(buffer.actions[rows, envs].reshape(-1, 1), device=self.device),
             targets=th.as_tensor(targets, device=self.device),
-            episode_steps=th.as_tensor(data.episode_steps[rows, envs], device=self.device),
+            episode_steps=th.as_tensor(buffer.episode_steps[rows, envs], device=self.device),
             trained=trained,
         )
 
-    def _next_state_values(self, data: TrajectorySamples, rows: np.ndarray, envs: np.ndarray) -> np.ndarray:
+    def _next_state_values(self, rows: np.ndarray, envs: np.ndarray) -> np.ndarray:
         """
-        :param data: the buffer's content
-        :param rows: the steps to bootstrap from
+        :param rows: the buffer rows to bootstrap from
         :param envs: their envs
         :return: q̂(S, A) of the action taken there (SARSA), or Σ_a π(a|S) q̂(S, a) (Expected SARSA), float32
         """
-        last_row = len(data.rewards) - 1
+        buffer = self.rollout_buffer
+        last_row = buffer.pos - 1
         cached_q, cached_updates, cached_timesteps = self._rollout_q_values
         if (
             self.update_mode == "per_step"
@@ -396,13 +433,14 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         else:
             # q̂ of every stored step in one forward pass, and the rows needed from it: the batch is the same whatever
             # the targets need, so a seeded run repeats to the last bit
+            data = buffer.get()
             n_rows, n_envs = data.rewards.shape
             observations = obs_as_tensor(select(data.observations, np.ones((n_rows, n_envs), dtype=bool)), self.device)
             with th.no_grad():
                 q_values = self.policy.bootstrap_net(observations).cpu().numpy().reshape(n_rows, n_envs, -1)[rows, envs]
         if self.expected_sarsa:
             return epsilon_greedy_expectation(q_values, self.exploration_rate).astype(np.float32)
-        return q_values[np.arange(len(rows)), data.actions[rows, envs]].astype(np.float32)
+        return q_values[np.arange(len(rows)), buffer.actions[rows, envs]].astype(np.float32)
 
     def _gradient_step(
         self, observations: th.Tensor | dict[str, th.Tensor], actions: th.Tensor, targets: th.Tensor
@@ -433,6 +471,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self._update_learning_rates([(self.policy.optimizer, self.lr_schedule, "train/learning_rate")])
         self._update_exploration_rate()
         self.logger.record("rollout/exploration_rate", self.exploration_rate)
+        if self._book_loop_step():
+            return
         batch = self._training_batch()
         if batch is None:
             return
@@ -458,15 +498,71 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             polyak_update(self.policy.q_net.parameters(), target.parameters(), self.tau)
             self._target_updated_at = self.num_timesteps
         self._n_updates += self.gradient_steps * len(chunks)
+        self._record_update(loss, q_first[0] if len(q_first) == 1 else th.cat(q_first), batch.targets)
+
+    def _record_update(self, loss: th.Tensor, q_predicted: th.Tensor, targets: th.Tensor) -> None:
+        """
+        Log an update.
+
+        :param loss: the loss of its last gradient step
+        :param q_predicted: q̂(S_t, A_t) of its transitions before its first gradient step
+        :param targets: their targets G_{t:t+n}
+        """
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
-        q_mean = (q_first[0] if len(q_first) == 1 else th.cat(q_first)).mean()
         # One conversion of the three (each .item() costs as much as a small tensor op, and this runs every env step
         # in the per-step mode)
-        loss_value, q_mean_value, target_mean = th.stack((loss, q_mean, batch.targets.mean())).tolist()
+        loss_value, q_mean_value, target_mean = th.stack((loss, q_predicted.mean(), targets.mean())).tolist()
         self.logger.record("train/loss", loss_value)
         self.logger.record("train/q_mean", q_mean_value)
         self.logger.record("train/target_mean", target_mean)
-        self.logger.record("train/n_transitions", len(batch.targets))
+        self.logger.record("train/n_transitions", len(targets))
+
+    def _book_loop_step(self) -> bool:
+        """
+        The update of the book's loop (one env, ``train_freq=1``, ``gradient_steps=1``, ``update_mode="per_step"``, no
+        bootstrap network: the box of S&B §10.2) between episode ends, where the one transition to train on is
+        S_{t−n}'s: its window holds n rewards and bootstraps from q̂(S_t, ·), which the rollout has just computed
+        with the same weights. It is ``train()``'s update of that transition to the last bit (the weights, the log;
+        ``tests/test_book_updates.py``), without the general case's arrays over the buffer and its batch of one:
+        those cost about as much as the gradient step's own overhead when they run at every env step (issue 12).
+
+        :return: whether it made the update (False: ``train()`` goes on with the general case, e.g. at an episode's
+            end, where several transitions complete together, or before n steps have been taken)
+        """
+        if not (
+            self.update_mode == "per_step"
+            and self.n_envs == 1
+            and self.train_freq == 1
+            and self.gradient_steps == 1
+            and self.policy.q_net_target is None
+        ):
+            return False
+        buffer = self.rollout_buffer
+        start, pos = int(buffer.start[0]), buffer.pos
+        cached_q, cached_updates, cached_timesteps = self._rollout_q_values
+        if (
+            pos - start != self.n_steps + 1
+            or buffer.dones[start:pos, 0].any()
+            or cached_updates != self._n_updates
+            or cached_timesteps + 1 != self.num_timesteps
+        ):
+            return False
+        discounts = gamma_powers(self.gamma, self.n_steps)
+        window = nstep_window(buffer.rewards[:pos, 0], buffer.dones[:pos, 0], start, discounts, self.n_steps)
+        # q̂(S_t, A_t), or Σ_a π(a|S_t) q̂(S_t, a) (Expected SARSA, S&B eq. 7.8), of the step just taken
+        if self.expected_sarsa:
+            bootstrap = epsilon_greedy_expectation(cached_q, self.exploration_rate).astype(np.float32)
+        else:
+            bootstrap = cached_q[[0], buffer.actions[pos - 1, 0]].astype(np.float32)
+        # G_{t:t+n} = R_{t+1} + … + γ^{n−1}R_{t+n} + γ^n q̂(S_{t+n}, A_{t+n}) (S&B eq. 10.4), float32, shape (1,)
+        target = th.as_tensor(window.reward_sum + window.bootstrap_discount * bootstrap, device=self.device)
+        observation = obs_as_tensor(select(buffer.observations, (slice(start, start + 1), 0)), self.device)
+        action = th.as_tensor(buffer.actions[start : start + 1, 0].reshape(-1, 1), device=self.device)
+        q_predicted, loss = self._gradient_step(observation, action, target)
+        buffer.mark_trained(1)
+        self._n_updates += 1
+        self._record_update(loss, q_predicted, target)
+        return True
 
     def _setup_learn(
         self,
