@@ -173,8 +173,11 @@ def test_a_benchmark_on_a_cluster_gives_the_local_results(tmp_path: Path) -> Non
     assert "2 runs: 2 cached, 0 to run" in again.stdout
 
 
-def test_a_run_whose_worker_dies_runs_again(tmp_path: Path) -> None:
+def test_a_run_whose_worker_dies_runs_again(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     budget = 15_000
+    # The killed worker cannot remove the temporary folder of the run it trained: in tmp_path, not the machine's /tmp
+    (tmp_path / "tmp").mkdir()
+    monkeypatch.setenv("TMPDIR", str(tmp_path / "tmp"))
     with dask_cluster(tmp_path / "cluster") as cluster:
         command = benchmark_command(
             tmp_path / "cache", "--algos", "reinforce", "--seeds", "2", "--budget", str(budget), "--eval-freq", "5000"
