@@ -33,6 +33,30 @@ VARIANTS = [
         "bootstrap network, Polyak tau 0.05 after every update",
     ),
     Variant(
+        "polyak_0.1",
+        CandidateSARSA,
+        {"target_update_interval": 1, "tau": 0.1},
+        "bootstrap network, Polyak tau 0.1 after every update",
+    ),
+    Variant(
+        "polyak_0.2",
+        CandidateSARSA,
+        {"target_update_interval": 1, "tau": 0.2},
+        "bootstrap network, Polyak tau 0.2 after every update",
+    ),
+    Variant(
+        "polyak_0.01",
+        CandidateSARSA,
+        {"target_update_interval": 1, "tau": 0.01},
+        "bootstrap network, Polyak tau 0.01 after every update",
+    ),
+    Variant(
+        "polyak_0.02",
+        CandidateSARSA,
+        {"target_update_interval": 1, "tau": 0.02},
+        "bootstrap network, Polyak tau 0.02 after every update",
+    ),
+    Variant(
         "gamma_0.995",
         CandidateSARSA,
         {"gamma": 0.995},
