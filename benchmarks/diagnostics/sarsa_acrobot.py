@@ -26,35 +26,15 @@ VARIANTS = [
         {"target_update_interval": 2000, "tau": 1.0},
         "bootstrap network copied every 2,000 env steps",
     ),
-    Variant(
-        "polyak_0.05",
-        CandidateSARSA,
-        {"target_update_interval": 1, "tau": 0.05},
-        "bootstrap network, Polyak tau 0.05 after every update",
-    ),
-    Variant(
-        "polyak_0.1",
-        CandidateSARSA,
-        {"target_update_interval": 1, "tau": 0.1},
-        "bootstrap network, Polyak tau 0.1 after every update",
-    ),
-    Variant(
-        "polyak_0.2",
-        CandidateSARSA,
-        {"target_update_interval": 1, "tau": 0.2},
-        "bootstrap network, Polyak tau 0.2 after every update",
-    ),
-    Variant(
-        "polyak_0.01",
-        CandidateSARSA,
-        {"target_update_interval": 1, "tau": 0.01},
-        "bootstrap network, Polyak tau 0.01 after every update",
-    ),
-    Variant(
-        "polyak_0.02",
-        CandidateSARSA,
-        {"target_update_interval": 1, "tau": 0.02},
-        "bootstrap network, Polyak tau 0.02 after every update",
+    # A bootstrap network moved by Polyak averaging after every update (stop 14; 0.05 first, the others after it)
+    *(
+        Variant(
+            f"polyak_{tau}",
+            CandidateSARSA,
+            {"target_update_interval": 1, "tau": tau},
+            f"bootstrap network, Polyak tau {tau} after every update",
+        )
+        for tau in (0.05, 0.1, 0.2, 0.01, 0.02)
     ),
     Variant(
         "gamma_0.995",
