@@ -452,6 +452,18 @@ def test_report_only_names_the_runs_not_run(tmp_path: Path) -> None:
     assert "failed" not in printed
 
 
+def test_reduced_runs_of_other_budgets_keep_their_own_outputs(tmp_path: Path) -> None:
+    # A second reduced run of a study (another --seeds/--episodes) wrote over the first's report
+    study_file, cache = write_study(tmp_path, TINY), tmp_path / "cache"
+    for budget in (["--seeds", "1"], ["--seeds", "2", "--episodes", "3"]):
+        with contextlib.redirect_stdout(io.StringIO()):
+            studies_cli.main([str(study_file), "--report-only", "--cache-dir", str(cache), *budget])
+    reduced = cache / studies_cli.REDUCED_RESULTS
+    assert sorted(path.name for path in reduced.iterdir()) == ["seeds-1", "seeds-2_episodes-3"]
+    assert "--seeds 1`" in (reduced / "seeds-1" / "STUDIES.md").read_text()
+    assert "--seeds 2 --episodes 3`" in (reduced / "seeds-2_episodes-3" / "STUDIES.md").read_text()
+
+
 def test_the_compute_counts_each_shared_run_once(tmp_path: Path) -> None:
     # Two studies that share a run (the same settings, e.g. a report's baseline in two figures): STUDIES.md's compute
     # is that of the distinct runs; a study's own table still counts all of its runs

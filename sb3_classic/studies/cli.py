@@ -20,7 +20,9 @@ from sb3_classic.harness.runner import RUN_FILE, RunError, check_run
 from sb3_classic.studies.outputs import PROGRAM, load_study_results, plural, study_command, write_studies_index, write_study
 from sb3_classic.studies.spec import STATED, StudyError, StudyRun, StudySpec, load_study
 
-#: Where reduced runs (--seeds, --episodes, --steps) write their outputs, inside the cache: they are not the study's
+#: Where reduced runs (--seeds, --episodes, --steps) write their outputs, inside the cache: they are not the study's.
+#: One folder per budget (e.g. ``quick-studies/seeds-2_episodes-20``), so that one reduced run's outputs do not
+#: overwrite another's
 REDUCED_RESULTS = "quick-studies"
 
 DESCRIPTION = """\
@@ -34,7 +36,8 @@ STUDIES.md, the index of every claim.
     python -m {program} STUDY.yml --scheduler tcp://HOST:8786     # on a Dask cluster (the dask extra)
 
 Finished runs are kept in {cache}/ and never run again: an interrupted study resumes where it stopped. Outputs go
-to {results}/; a reduced run's to {cache}/{reduced}/, as they are not the study's result.
+to {results}/; a reduced run's to {cache}/{reduced}/ (a folder per budget, e.g. seeds-2_episodes-20/), as they are
+not the study's result.
 """
 
 
@@ -104,7 +107,10 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
     parser.add_argument(
         "--results-dir",
         type=Path,
-        help=f"figures, tables and STUDIES.md (default {defaults.results_dir}; reduced runs: CACHE_DIR/{REDUCED_RESULTS})",
+        help=(
+            f"figures, tables and STUDIES.md (default {defaults.results_dir}; reduced runs: "
+            f"CACHE_DIR/{REDUCED_RESULTS}/BUDGET)"
+        ),
     )
     parser.add_argument("--list", action="store_true", help="list each study's runs and how many are cached; run nothing")
     parser.add_argument("--report-only", action="store_true", help="run nothing: outputs from the runs already cached")
@@ -127,7 +133,12 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
     if duplicates:
         console.print(f"[red]Two study files have the same name: {escape(', '.join(duplicates))}[/red]", highlight=False)
         return 2
-    results_dir = args.results_dir or (args.cache_dir / REDUCED_RESULTS if reduced else defaults.results_dir)
+    # The options that change what is run (not --workers, --scheduler, the folders or --report-only, which change
+    # where and how, not the results): in the command each study's outputs show, and in a reduced run's folder
+    options = {name: getattr(args, name) for name in ("seeds", "episodes", "steps") if getattr(args, name) is not None}
+    budget = [item for name, value in options.items() for item in (f"--{name}", str(value))]
+    reduced_dir = args.cache_dir / REDUCED_RESULTS / "_".join(f"{name}-{value}" for name, value in options.items())
+    results_dir = args.results_dir or (reduced_dir if reduced else defaults.results_dir)
 
     runs = [run for study in studies for run in study.runs()]
     pending = [run.spec for run in runs if not (run.spec.run_dir(args.cache_dir) / RUN_FILE).exists()]
@@ -160,12 +171,7 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
             return status
         console.print(f"Runs: {time.perf_counter() - start:.0f} s")
 
-    # The command each study's outputs show re-runs it from scratch: its file and the options that change what is run
-    # (not --workers, --scheduler, the folders or --report-only, which change where and how, not the results)
-    budget: list[str] = []
-    for name in ("seeds", "episodes", "steps"):
-        if getattr(args, name) is not None:
-            budget += [f"--{name}", str(getattr(args, name))]
+    # The command each study's outputs show re-runs it from scratch: its file and the budget options
     missing = []
     for study in studies:
         results = load_study_results(study, args.cache_dir)
