@@ -487,7 +487,11 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
             self._raise_non_finite(self._last_obs, "observation", "the first observation after the reset")  # type: ignore[arg-type]
         # The progress of this learn() call from its first step (the schedules the rollout reads: a linear ε)
         self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
+        self._on_learn_start()
         return total_timesteps, callback
+
+    def _on_learn_start(self) -> None:
+        """Called by ``learn()`` once set up (``num_timesteps`` reset or not, the progress of this call at its start)."""
 
     def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
         """

@@ -5,7 +5,6 @@ import numpy as np
 import torch as th
 import torch.nn.functional as F
 from gymnasium import spaces
-from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor, polyak_update
@@ -417,19 +416,12 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         :return: q̂(S, A) of the action taken there (SARSA), or Σ_a π(a|S) q̂(S, a) (Expected SARSA), float32
         """
         buffer = self.rollout_buffer
-        last_row = buffer.pos - 1
-        cached_q, cached_updates, cached_timesteps = self._rollout_q_values
-        if (
-            self.update_mode == "per_step"
-            and self.policy.q_net_target is None
-            and (rows == last_row).all()
-            and cached_updates == self._n_updates
-            and cached_timesteps + self.n_envs == self.num_timesteps
-        ):
+        last_step_q = self._last_step_q_values()
+        if last_step_q is not None and (rows == buffer.pos - 1).all():
             # q̂(S, ·) of the last step's states, computed by the rollout loop with the same weights (no update since):
             # with train_freq=1 this is every bootstrap of the per-step mode, which then needs one forward pass less
             # (the batch mode always takes the pass below, so that its seeded runs repeat those of earlier versions)
-            q_values = cached_q[envs]
+            q_values = last_step_q[envs]
         else:
             # q̂ of every stored step in one forward pass, and the rows needed from it: the batch is the same whatever
             # the targets need, so a seeded run repeats to the last bit
@@ -438,9 +430,32 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             observations = obs_as_tensor(select(data.observations, np.ones((n_rows, n_envs), dtype=bool)), self.device)
             with th.no_grad():
                 q_values = self.policy.bootstrap_net(observations).cpu().numpy().reshape(n_rows, n_envs, -1)[rows, envs]
+        return self._sarsa_values(q_values, buffer.actions[rows, envs])
+
+    def _last_step_q_values(self) -> np.ndarray | None:
+        """
+        :return: q̂(S, ·) of the last step's states, shape (n_envs, n_actions), as the rollout loop computed them
+            (``update_mode="per_step"``, no bootstrap network), if no update has changed the weights since; else None
+        """
+        q_values, n_updates, num_timesteps = self._rollout_q_values
+        if (
+            self.update_mode == "per_step"
+            and self.policy.q_net_target is None
+            and n_updates == self._n_updates
+            and num_timesteps + self.n_envs == self.num_timesteps
+        ):
+            return q_values
+        return None
+
+    def _sarsa_values(self, q_values: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        """
+        :param q_values: q̂(S, ·) of the states to bootstrap from, shape (B, n_actions)
+        :param actions: the actions taken there, shape (B,)
+        :return: q̂(S, A) of the action taken (SARSA), or Σ_a π(a|S) q̂(S, a) (Expected SARSA, S&B eq. 7.8), float32
+        """
         if self.expected_sarsa:
             return epsilon_greedy_expectation(q_values, self.exploration_rate).astype(np.float32)
-        return q_values[np.arange(len(rows)), buffer.actions[rows, envs]].astype(np.float32)
+        return q_values[np.arange(len(actions)), actions].astype(np.float32)
 
     def _gradient_step(
         self, observations: th.Tensor | dict[str, th.Tensor], actions: th.Tensor, targets: th.Tensor
@@ -529,31 +544,17 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         :return: whether it made the update (False: ``train()`` goes on with the general case, e.g. at an episode's
             end, where several transitions complete together, or before n steps have been taken)
         """
-        if not (
-            self.update_mode == "per_step"
-            and self.n_envs == 1
-            and self.train_freq == 1
-            and self.gradient_steps == 1
-            and self.policy.q_net_target is None
-        ):
+        if not (self.n_envs == 1 and self.train_freq == 1 and self.gradient_steps == 1):
             return False
+        last_step_q = self._last_step_q_values()  # (None unless per-step, without a bootstrap network)
         buffer = self.rollout_buffer
         start, pos = int(buffer.start[0]), buffer.pos
-        cached_q, cached_updates, cached_timesteps = self._rollout_q_values
-        if (
-            pos - start != self.n_steps + 1
-            or buffer.dones[start:pos, 0].any()
-            or cached_updates != self._n_updates
-            or cached_timesteps + 1 != self.num_timesteps
-        ):
+        if last_step_q is None or pos - start != self.n_steps + 1 or buffer.dones[start:pos, 0].any():
             return False
         discounts = gamma_powers(self.gamma, self.n_steps)
         window = nstep_window(buffer.rewards[:pos, 0], buffer.dones[:pos, 0], start, discounts, self.n_steps)
-        # q̂(S_t, A_t), or Σ_a π(a|S_t) q̂(S_t, a) (Expected SARSA, S&B eq. 7.8), of the step just taken
-        if self.expected_sarsa:
-            bootstrap = epsilon_greedy_expectation(cached_q, self.exploration_rate).astype(np.float32)
-        else:
-            bootstrap = cached_q[[0], buffer.actions[pos - 1, 0]].astype(np.float32)
+        # q̂(S_t, A_t), or Σ_a π(a|S_t) q̂(S_t, a) (Expected SARSA), of the step just taken
+        bootstrap = self._sarsa_values(last_step_q, buffer.actions[pos - 1 : pos, 0])
         # G_{t:t+n} = R_{t+1} + … + γ^{n−1}R_{t+n} + γ^n q̂(S_{t+n}, A_{t+n}) (S&B eq. 10.4), float32, shape (1,)
         target = th.as_tensor(window.reward_sum + window.bootstrap_discount * bootstrap, device=self.device)
         observation = obs_as_tensor(select(buffer.observations, (slice(start, start + 1), 0)), self.device)
@@ -564,22 +565,11 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self._record_update(loss, q_predicted, target)
         return True
 
-    def _setup_learn(
-        self,
-        total_timesteps: int,
-        callback: MaybeCallback = None,
-        reset_num_timesteps: bool = True,
-        tb_log_name: str = "run",
-        progress_bar: bool = False,
-    ) -> tuple[int, BaseCallback]:
-        total_timesteps, callback = super()._setup_learn(
-            total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar
-        )
+    def _on_learn_start(self) -> None:
         # num_timesteps may have been reset: the bootstrap network's next copy counts from here
         self._target_updated_at = min(self._target_updated_at, self.num_timesteps)
         # A linear ε restarts with this learn() call from its first step (SB3's DQN), not after the first rollout
         self._update_exploration_rate()
-        return total_timesteps, callback
 
     def _excluded_save_params(self) -> list[str]:
         # A cache of the rollout loop's last forward pass, not training state
