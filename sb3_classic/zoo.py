@@ -168,9 +168,13 @@ def convert_nstep_sarsa_params(sampled_params: dict[str, Any]) -> dict[str, Any]
     (rl-zoo3 calls it to train with a stored trial: ``--storage ... --study-name ... --trial-id N``).
 
     :param sampled_params: the trial's parameters (``trial.params``)
-    :return: keyword arguments of ``NStepSARSA``
+    :return: keyword arguments of ``NStepSARSA``, without the parameter of the ε schedule not chosen (``NStepSARSA``
+        refuses ``exploration_fraction`` with the exponential schedule)
     """
-    return _convert_common(sampled_params)
+    params = _convert_common(sampled_params)
+    linear = params.get("exploration_schedule") == "linear"
+    params.pop("exploration_decay_rate" if linear else "exploration_fraction", None)
+    return params
 
 
 def sample_nstep_sarsa_params(
@@ -196,7 +200,7 @@ def sample_nstep_sarsa_params(
         "one_minus_gamma": trial.suggest_float("one_minus_gamma", 1e-4, 0.03, log=True),
         "expected_sarsa": trial.suggest_categorical("expected_sarsa", (False, True)),
         # ε ← max(ε_final, ε · rate) per episode, or linear over a fraction of training; both are sampled (without
-        # conditional parameters, multivariate TPE samples jointly) and the schedule not chosen ignores its own
+        # conditional parameters, multivariate TPE samples jointly) and the one of the schedule not chosen is dropped
         "exploration_schedule": trial.suggest_categorical("exploration_schedule", ("exponential", "linear")),
         "exploration_decay_rate": trial.suggest_categorical("exploration_decay_rate", (0.9, 0.95, 0.98, 0.99, 0.995, 0.999)),
         "exploration_fraction": trial.suggest_categorical("exploration_fraction", (0.05, 0.1, 0.2, 0.4)),

@@ -314,6 +314,9 @@ INVALID_ARGUMENTS = [
     (NStepSARSA, dict(exploration_final_eps=-0.1), "exploration_final_eps=-0.1"),
     (NStepSARSA, dict(exploration_decay_rate=0.0), "exploration_decay_rate=0.0"),
     (NStepSARSA, dict(exploration_schedule="cosine"), "exploration_schedule='cosine' must be one of"),
+    # A DQN user's argument alone: the default exponential schedule would ignore it
+    (NStepSARSA, dict(exploration_fraction=0.2), "exploration_fraction=0.2 .* exploration_schedule='linear'"),
+    (NStepSARSA, dict(exploration_schedule="linear", exploration_fraction=0.0), "exploration_fraction=0.0"),
     (NStepSARSA, dict(learning_rate=0.0), "learning_rate=0.0 must be > 0"),
     (NStepSARSA, dict(gamma=-0.1), "gamma=-0.1"),
     (NStepSARSA, dict(train_freq=0), "train_freq=0"),

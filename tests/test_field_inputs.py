@@ -331,6 +331,55 @@ def test_a_short_run_shows_a_curve(tmp_path: Path, model_class: type[BaseAlgorit
     assert points["rollout/ep_rew_mean"] >= 5, points
 
 
+@pytest.mark.parametrize(("train_freq", "points"), [(16, 1024 // 128), (1, 1024 // 128), (5, 1024 // 130)])
+def test_sarsa_logs_every_128_env_steps_per_env_by_default(tmp_path: Path, train_freq: int, points: int) -> None:
+    """
+    The per-step mode (``train_freq=1``, an update per env step) wrote a TensorBoard point, and with ``verbose=1`` a
+    table, every 8 env steps when the default counted 8 updates: 251 tables for 2,000 steps of the zoo's
+    MountainCar-v0 entry. ``"auto"`` dumps every 128 env steps per env (whole updates: 130 with ``train_freq=5``).
+    """
+    model = make_model(NStepSARSA, seed=0, tensorboard_log=str(tmp_path), train_freq=train_freq, n_steps=1)
+    model.learn(1024 - 1024 % train_freq)
+    # The dumps during learn() and the one when it returns (none there if the last update was just dumped)
+    assert scalars(tmp_path)["train/loss"] in (points, points + 1)
+
+
+@pytest.mark.parametrize(("update_mode", "n_envs"), [("batch", 2), ("per_step", 1), ("per_step", 2)])
+def test_sarsa_logs_the_means_of_its_updates_predictions_and_targets(update_mode: str, n_envs: int) -> None:
+    """``train/q_mean`` and ``train/target_mean``: the means over an update's transitions, before its first step."""
+    model = make_model(
+        NStepSARSA, make_vec_env("CartPole-v1", n_envs=n_envs), seed=0, n_steps=2, train_freq=4, update_mode=update_mode
+    )
+    model.learn(64)  # past the first updates, whose batches can be shorter
+    steps: list[tuple[th.Tensor, th.Tensor]] = []
+    gradient_step = model._gradient_step
+
+    def recorded(observations: th.Tensor, actions: th.Tensor, targets: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
+        q_predicted, loss = gradient_step(observations, actions, targets)
+        steps.append((q_predicted, targets))
+        return q_predicted, loss
+
+    model._gradient_step = recorded
+    model.learn(4 * n_envs, reset_num_timesteps=False, log_interval=None)  # no dumps: the values stay in the logger
+    dumped = model.logger.name_to_value
+    # The update's first pass (per step: one gradient step per transition, then the next passes)
+    first_pass = steps[: len(steps) // model.gradient_steps]
+    q_first = th.cat([q for q, _ in first_pass])
+    targets = th.cat([target for _, target in first_pass])
+    # (An episode end in the update's steps changes how many targets complete: 4 × n_envs without one)
+    assert dumped["train/n_transitions"] == len(targets) >= 2
+    assert dumped["train/q_mean"] == pytest.approx(float(q_first.double().mean()), rel=1e-6)
+    assert dumped["train/target_mean"] == pytest.approx(float(targets.double().mean()), rel=1e-6)
+
+
+@pytest.mark.parametrize("log_interval", [0, -1, 2.5])
+def test_sarsa_refuses_a_log_interval_that_is_not_a_count(log_interval: Any) -> None:
+    model = make_model(NStepSARSA, seed=0)
+    with pytest.raises(ValueError, match=r'log_interval=.*"auto"'):
+        model.learn(100, log_interval=log_interval)
+    assert model.num_timesteps == 0
+
+
 @pytest.mark.parametrize("model_class", MODEL_LIST)
 def test_what_was_recorded_is_dumped_when_learn_returns(tmp_path: Path, model_class: type[BaseAlgorithm]) -> None:
     """Fewer updates than ``log_interval``: the last update's values are in the logs anyway."""

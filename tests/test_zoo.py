@@ -622,4 +622,8 @@ def test_train_with_a_stored_trial(tmp_path: Path, algo: str) -> None:
         assert model.value_learning_rate(1.0) == pytest.approx(params["value_learning_rate"])
     else:
         assert (model.n_steps, model.train_freq) == (params["n_steps"], params["train_freq"])
-        assert model.exploration_decay_rate == params["exploration_decay_rate"]
+        assert model.exploration_schedule == params["exploration_schedule"]
+        if params["exploration_schedule"] == "linear":
+            assert model.exploration_fraction == params["exploration_fraction"]
+        else:
+            assert model.exploration_decay_rate == params["exploration_decay_rate"]

@@ -462,9 +462,9 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
                 self.dump_logs(iteration)
             self.train()
 
-        if self.logger.name_to_value:
+        if log_interval is not None and self.logger.name_to_value:
             # What was recorded since the last dump (at least the last update's train/ values) is in the logs when
-            # learn() returns, however short the run
+            # learn() returns, however short the run (log_interval=None: no dumps at all, as in SB3)
             self.dump_logs(iteration)
         callback.on_training_end()
         return self

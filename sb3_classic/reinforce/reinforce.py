@@ -321,7 +321,7 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         :param callback: callback(s) called at every step with the state of the algorithm
         :param log_interval: updates between two logger dumps (each update takes at least ``n_episodes`` episodes;
             the default, 4, is SB3's DQN's 4 episodes); whatever was recorded since the last dump is dumped when
-            ``learn()`` returns
+            ``learn()`` returns; None: no dumps
         :param tb_log_name: the name of the run for TensorBoard logging
         :param reset_num_timesteps: whether to reset ``num_timesteps`` (and the envs); the learning-rate decay
             counts keep going either way
