@@ -67,6 +67,19 @@ def reference_nstep_targets(traj: dict[str, np.ndarray], env: int, gamma: float,
     return targets
 
 
+def reference_lambda_targets(traj: dict[str, np.ndarray], env: int, gamma: float, n: int, lam: float) -> dict[int, float]:
+    """
+    The truncated λ-return of each τ whose n-step target is computable, by the book's weighted sum (S&B eq. 12.9):
+    G^λ_{τ:h} = (1 − λ) Σ_{k=1}^{n−1} λ^{k−1} G_{τ:τ+k} + λ^{n−1} G_{τ:τ+n}, with h = τ + n; where the episode ends
+    first, G_{τ:τ+k} is the return to its end for every k past it (eq. 12.9 with h = T gives the same).
+    """
+    by_k = [reference_nstep_targets(traj, env, gamma, k) for k in range(1, n + 1)]
+    return {
+        tau: (1 - lam) * sum(lam ** (k - 1) * by_k[k - 1][tau] for k in range(1, n)) + lam ** (n - 1) * g
+        for tau, g in by_k[-1].items()
+    }
+
+
 def bootstrap_values(traj: dict[str, np.ndarray], unknown: float = np.nan) -> np.ndarray:
     """next_values as the algorithms build them: q̂(S_{t+1}, A_{t+1}), 0 at a termination, v̂ at a truncation."""
     next_values = np.full_like(traj["rewards"], unknown)

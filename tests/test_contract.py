@@ -322,6 +322,7 @@ INVALID_ARGUMENTS = [
     (NStepSARSA, dict(train_freq=0), "train_freq=0"),
     (NStepSARSA, dict(train_freq=(4, "step")), r"train_freq=\(4, 'step'\) must be an integer >= 1.*tuple form"),
     (NStepSARSA, dict(loss_function="l1"), "loss_function='l1' must be one of 'mse', 'huber'"),
+    (NStepSARSA, dict(td_lambda=1.5), r"td_lambda=1.5 must be a number in \[0.0, 1.0\]"),
     (NStepSARSA, dict(lr_decay_milestones=[300, -5]), r"lr_decay_milestones\[...\]=-5"),
     (NStepSARSA, dict(lr_decay_milestones=300), r"lr_decay_milestones=300 must be a list of counts, e.g. \[300, 500\]"),
     (

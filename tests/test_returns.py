@@ -2,7 +2,13 @@
 
 import numpy as np
 import pytest
-from reference import bootstrap_values, random_trajectories, reference_mc_returns, reference_nstep_targets
+from reference import (
+    bootstrap_values,
+    random_trajectories,
+    reference_lambda_targets,
+    reference_mc_returns,
+    reference_nstep_targets,
+)
 
 from sb3_classic.common.returns import (
     discounted_returns,
@@ -11,6 +17,7 @@ from sb3_classic.common.returns import (
     nstep_targets,
     nstep_window,
     nstep_windows,
+    truncated_lambda_returns,
 )
 
 
@@ -103,6 +110,41 @@ def test_one_window_is_the_vectorised_window_to_the_last_bit(seed: int) -> None:
         assert window.stop_row == windows.stop_rows[t, 0]
         assert window.reward_sum.tobytes() == windows.reward_sums[t, 0].tobytes()
         assert window.bootstrap_discount.tobytes() == windows.bootstrap_discounts[t, 0].tobytes()
+
+
+@pytest.mark.parametrize("seed", range(15))
+@pytest.mark.parametrize(("n", "lam"), [(1, 0.5), (3, 0.0), (4, 0.5), (6, 0.8), (10, 0.3)])
+def test_truncated_lambda_returns_match_the_books_weighted_sum(seed: int, n: int, lam: float) -> None:
+    """The recursion against eq. 12.9's sum of k-step returns, episode ends and truncations inside windows included."""
+    rng = np.random.default_rng(seed)
+    traj = random_trajectories(rng, n_steps=int(rng.integers(1, 40)), n_envs=3)
+    gamma = 0.9
+    windows = nstep_windows(traj["rewards"], traj["dones"], gamma, n)
+    rows, envs = np.nonzero(windows.complete)
+    stop_rows = windows.stop_rows[rows, envs]
+    next_values = bootstrap_values(traj, unknown=0.0)
+    returns = truncated_lambda_returns(traj["rewards"], next_values, rows, envs, stop_rows, gamma, lam)
+    expected = {env: reference_lambda_targets(traj, env, gamma, n, lam) for env in range(3)}
+    assert sorted(zip(envs.tolist(), rows.tolist(), strict=True)) == sorted((e, t) for e in expected for t in expected[e])
+    for target, t, env in zip(returns, rows.tolist(), envs.tolist(), strict=True):
+        assert target == pytest.approx(expected[env][t], rel=1e-5, abs=1e-5)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_truncated_lambda_returns_are_the_nstep_and_one_step_returns_at_1_and_0(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    traj = random_trajectories(rng, n_steps=30, n_envs=2)
+    gamma, n = 0.95, 5
+    next_values = bootstrap_values(traj, unknown=0.0)
+    windows = nstep_windows(traj["rewards"], traj["dones"], gamma, n)
+    rows, envs = np.nonzero(windows.complete)
+    stop_rows = windows.stop_rows[rows, envs]
+    nstep, _ = nstep_targets(traj["rewards"], traj["dones"], next_values, gamma, n)
+    lam_1 = truncated_lambda_returns(traj["rewards"], next_values, rows, envs, stop_rows, gamma, 1.0)
+    np.testing.assert_allclose(lam_1, nstep[rows, envs], rtol=1e-5, atol=1e-5)
+    one_step = traj["rewards"][rows, envs] + gamma * next_values[rows, envs]
+    lam_0 = truncated_lambda_returns(traj["rewards"], next_values, rows, envs, stop_rows, gamma, 0.0)
+    np.testing.assert_allclose(lam_0, one_step, rtol=1e-5, atol=1e-5)
 
 
 @pytest.mark.parametrize("epsilon", [0.0, 0.1, 1.0])

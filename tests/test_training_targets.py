@@ -11,7 +11,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
-from reference import episodes_of, reference_mc_returns, reference_nstep_targets
+from reference import episodes_of, reference_lambda_targets, reference_mc_returns, reference_nstep_targets
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 
@@ -93,19 +93,23 @@ def assert_same_rows(actual: list[np.ndarray], expected: list[np.ndarray]) -> No
 
 
 @pytest.mark.parametrize(
-    ("n_steps", "train_freq", "n_envs", "expected_sarsa", "update_mode"),
+    ("n_steps", "train_freq", "n_envs", "expected_sarsa", "update_mode", "td_lambda"),
     [
-        (4, 3, 3, False, "batch"),
-        (1, 1, 1, False, "batch"),
-        (6, 2, 2, True, "batch"),
-        (3, 10, 2, False, "batch"),
+        (4, 3, 3, False, "batch", 1.0),
+        (1, 1, 1, False, "batch", 1.0),
+        (6, 2, 2, True, "batch", 1.0),
+        (3, 10, 2, False, "batch", 1.0),
         # One env, an update every step: the book's loop, whose batches are built without the whole-buffer arrays
-        (4, 1, 1, True, "per_step"),
-        (3, 1, 1, False, "per_step"),
+        (4, 1, 1, True, "per_step", 1.0),
+        (3, 1, 1, False, "per_step", 1.0),
+        # Truncated λ-returns G^λ_{t:t+n} (S&B eq. 12.9) instead of G_{t:t+n}
+        (4, 3, 3, False, "batch", 0.5),
+        (6, 2, 2, True, "batch", 0.8),
+        (3, 1, 1, False, "per_step", 0.3),
     ],
 )
 def test_sarsa_trains_every_transition_once_on_its_full_nstep_target(
-    n_steps: int, train_freq: int, n_envs: int, expected_sarsa: bool, update_mode: str
+    n_steps: int, train_freq: int, n_envs: int, expected_sarsa: bool, update_mode: str, td_lambda: float
 ) -> None:
     epsilon, gamma = 0.3, 0.9
     model = NStepSARSA(
@@ -116,6 +120,7 @@ def test_sarsa_trains_every_transition_once_on_its_full_nstep_target(
         update_mode=update_mode,
         gamma=gamma,
         expected_sarsa=expected_sarsa,
+        td_lambda=td_lambda,
         exploration_initial_eps=epsilon,
         exploration_final_eps=epsilon,
         seed=1,
@@ -139,7 +144,11 @@ def test_sarsa_trains_every_transition_once_on_its_full_nstep_target(
 
     expected_q, expected_targets = [], []
     for env in range(n_envs):
-        for t, target in reference_nstep_targets(reference_traj, env, gamma, n_steps).items():
+        if td_lambda < 1.0:
+            references = reference_lambda_targets(reference_traj, env, gamma, n_steps, td_lambda)
+        else:
+            references = reference_nstep_targets(reference_traj, env, gamma, n_steps)
+        for t, target in references.items():
             expected_q.append(q_taken[t, env])
             expected_targets.append(target)
     assert expected_targets, "the run must produce complete targets"

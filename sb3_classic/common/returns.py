@@ -183,6 +183,52 @@ def nstep_targets(
     return targets.astype(np.float32), windows.complete
 
 
+def truncated_lambda_returns(
+    rewards: np.ndarray,
+    next_values: np.ndarray,
+    rows: np.ndarray,
+    envs: np.ndarray,
+    stop_rows: np.ndarray,
+    gamma: float,
+    td_lambda: float,
+) -> np.ndarray:
+    """
+    Truncated λ-returns over the n-step windows of ``nstep_windows`` (Sutton & Barto §12.3, eq. 12.9): for the window
+    of transition t, whose last reward is at step h − 1 (``stop_rows``, so h = t + n, or the episode's end),
+
+    G^λ_{t:h} = (1 − λ) Σ_{k=1}^{h−t−1} λ^{k−1} G_{t:t+k} + λ^{h−t−1} G_{t:h},
+
+    the window's k-step returns averaged with weights λ^{k−1}: λ = 1 gives the n-step return G_{t:t+n} (eq. 10.4),
+    λ = 0 the one-step return. Computed backwards through each window with the recursion
+    G^λ_{k:h} = R_{k+1} + γ[(1 − λ) q̂(S_{k+1}, A_{k+1}) + λ G^λ_{k+1:h}] from G^λ_{h−1:h} = R_h + γ × (the window's
+    bootstrap value), in float64, vectorised over the windows (a loop over k < n). CleanRL's PQN uses the same
+    recursion over whole rollouts (Q(λ), with max_a q̂).
+
+    :param rewards: R_{t+1}, shape (n_steps_stored, n_envs)
+    :param next_values: the value after step t: q̂(S_{t+1}, A_{t+1}) (or the ε-greedy expectation) inside a window,
+        and at each window's last step its bootstrap value (0 after a termination, the final state's after a
+        truncation), shape (n_steps_stored, n_envs); read only at the windows' steps
+    :param rows: the first step t of each window, shape (B,)
+    :param envs: the env of each window, shape (B,)
+    :param stop_rows: the step of each window's last reward, shape (B,), ``stop_rows >= rows``
+    :param gamma: discount factor γ
+    :param td_lambda: λ in [0, 1]
+    :return: G^λ_{t:h} of each window, shape (B,), float32
+    """
+    rewards = rewards.astype(np.float64)
+    next_values = next_values.astype(np.float64)
+    returns = rewards[stop_rows, envs] + gamma * next_values[stop_rows, envs]
+    lengths = stop_rows - rows + 1
+    for k in range(int(lengths.max(initial=1)) - 2, -1, -1):
+        # Step t + k of each window that has a later step (the others keep their return)
+        inside = k < lengths - 1
+        step = np.where(inside, rows + k, stop_rows)
+        # G^λ_{k:h} = R_{k+1} + γ[(1 − λ) q̂(S_{k+1}, A_{k+1}) + λ G^λ_{k+1:h}] (S&B eq. 12.9, recursively)
+        earlier = rewards[step, envs] + gamma * ((1.0 - td_lambda) * next_values[step, envs] + td_lambda * returns)
+        returns = np.where(inside, earlier, returns)
+    return returns.astype(np.float32)
+
+
 def epsilon_greedy_expectation(q_values: np.ndarray | float, epsilon: float) -> np.ndarray:
     """
     V̄(s) = Σ_a π(a|s) q̂(s, a) under the ε-greedy policy π (Sutton & Barto eq. 7.8): the greedy action gets

@@ -18,6 +18,7 @@ from sb3_classic.common.returns import (
     greedy_random_ties,
     nstep_window,
     nstep_windows,
+    truncated_lambda_returns,
 )
 from sb3_classic.common.schedules import ExponentialDecay
 from sb3_classic.common.utils import check_choice, check_positive_int, check_range
@@ -63,9 +64,10 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     much as one on a single transition: the per-step mode would take 128× more gradient steps for the same data
     (the benchmarks' learning curves in ``benchmarks/results/learning.md`` are the batch mode's).
 
-    Two options that are not in the book, for neural networks (both off by default, so the book's algorithm is the
-    default): a slowly-moving bootstrap network (``target_update_interval``, ``tau``: SB3's DQN names), and
-    LayerNorm in the Q-network (``policy_kwargs=dict(layer_norm=True)``, as CleanRL's PQN).
+    Options that are not in §10.2's algorithm, for neural networks (all off by default, so the book's algorithm is the
+    default): a slowly-moving bootstrap network (``target_update_interval``, ``tau``: SB3's DQN names), truncated
+    λ-returns G^λ_{t:t+n} as targets (``td_lambda``, §12.3; CleanRL's PQN uses λ-returns), and LayerNorm in the
+    Q-network (``policy_kwargs=dict(layer_norm=True)``, as PQN).
 
     The greedy action breaks ties at random (as the book's ``argmax`` does), so that a q̂ initialised to a constant
     does not always pick the first action; ``predict(deterministic=True)`` picks the first of tied actions, so that it
@@ -92,6 +94,11 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         (each transition's own update with the full step size, in time order: the book's), see above
     :param gamma: discount factor γ
     :param expected_sarsa: bootstrap from the ε-greedy expectation of q̂ instead of q̂ of the action taken
+    :param td_lambda: λ of the truncated λ-return G^λ_{t:t+n} (S&B §12.3, eq. 12.9), the target of each transition:
+        the k-step returns G_{t:t+k} of its n-step window (k = 1, …, n) averaged with weights (1 − λ)λ^{k−1}, and
+        λ^{n−1} for the n-step one. 1 (the default) is the n-step return G_{t:t+n} of §10.2, 0 the one-step return.
+        Not in §10.2's algorithm (with λ < 1 it is the forward view of n-step-truncated SARSA(λ), as CleanRL's PQN
+        uses λ-returns); each update then computes q̂ of every stored step once more
     :param exploration_schedule: ``"exponential"``: ε ← max(ε_final, ε · ``exploration_decay_rate``) at the end of
         every episode (the seed report's); ``"linear"``: from initial to final over ``exploration_fraction`` of
         each ``learn()`` call (SB3's DQN)
@@ -144,6 +151,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         update_mode: str = "batch",
         gamma: float = 0.99,
         expected_sarsa: bool = False,
+        td_lambda: float = 1.0,
         exploration_schedule: str = "exponential",
         exploration_initial_eps: float = 1.0,
         exploration_final_eps: float = 0.05,
@@ -193,6 +201,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self.gradient_steps = gradient_steps
         self.update_mode = update_mode
         self.expected_sarsa = expected_sarsa
+        self.td_lambda = td_lambda
         self.exploration_schedule = exploration_schedule
         self.exploration_initial_eps = exploration_initial_eps
         self.exploration_final_eps = exploration_final_eps
@@ -241,6 +250,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             )
         check_range("exploration_decay_rate", self.exploration_decay_rate, 0.0, 1.0, low_open=True)
         check_choice("loss_function", self.loss_function, ("mse", "huber"))
+        check_range("td_lambda", self.td_lambda, 0.0, 1.0, hint="1.0 is the n-step return G_{t:t+n} (S&B §10.2)")
         if self.target_update_interval is not None:
             check_positive_int("target_update_interval", self.target_update_interval, hint="or None for no target network")
         check_range("tau", self.tau, 0.0, 1.0, low_open=True, hint="1.0 copies q̂ at every target update")
@@ -406,8 +416,14 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         # target needs one: no bootstrap past a termination, the final state's after a truncation
         continuing = ~buffer.dones[stop_rows, envs]
         truncated = buffer.truncated[stop_rows, envs]
+        # λ-returns need the value after every step of each window: of every stored step, from one forward pass
+        stored_values = self._stored_values() if self.td_lambda < 1.0 else None
         if continuing.any():
-            bootstrap[continuing] = self._next_state_values(stop_rows[continuing] + 1, envs[continuing])
+            next_rows = stop_rows[continuing] + 1
+            if stored_values is not None:
+                bootstrap[continuing] = stored_values[next_rows, envs[continuing]]
+            else:
+                bootstrap[continuing] = self._next_state_values(next_rows, envs[continuing])
         if truncated.any():
             # Every truncation in the buffer in one forward pass, as the rollout stored them (a batch of other rows
             # could round q̂ differently in the last bit: seeded runs would not repeat)
@@ -417,8 +433,17 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             with th.no_grad():
                 final_values[truncations] = self._bootstrap_values(self.policy.bootstrap_net(final_obs))
             bootstrap[truncated] = final_values[stop_rows[truncated], envs[truncated]]
-        # G_{t:t+n} = R_{t+1} + … + γ^{K−1}R_{t+K} + γ^K × the bootstrap value (S&B eq. 10.4), float32
-        targets = reward_sums + bootstrap_discounts * bootstrap
+        if stored_values is None:
+            # G_{t:t+n} = R_{t+1} + … + γ^{K−1}R_{t+K} + γ^K × the bootstrap value (S&B eq. 10.4), float32
+            targets = reward_sums + bootstrap_discounts * bootstrap
+        else:
+            # G^λ_{t:t+n} (S&B eq. 12.9): q̂(S_{k+1}, A_{k+1}) after each step k of a window, its bootstrap after the last
+            next_values = np.zeros_like(stored_values)
+            next_values[:-1] = stored_values[1:]
+            next_values[stop_rows, envs] = bootstrap
+            targets = truncated_lambda_returns(
+                buffer.rewards[:pos], next_values, rows, envs, stop_rows, self.gamma, self.td_lambda
+            )
         return TrainingBatch(
             observations=obs_as_tensor(select(buffer.observations, (rows, envs)), self.device),
             actions=th.as_tensor(buffer.actions[rows, envs].reshape(-1, 1), device=self.device),
@@ -439,16 +464,21 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             # q̂(S, ·) of the last step's states, computed by the rollout loop with the same weights (no update since):
             # with train_freq=1 this is every bootstrap of the per-step mode, which then needs one forward pass less
             # (the batch mode always takes the pass below, so that its seeded runs repeat those of earlier versions)
-            q_values = last_step_q[envs]
-        else:
-            # q̂ of every stored step in one forward pass, and the rows needed from it: the batch is the same whatever
-            # the targets need, so a seeded run repeats to the last bit
-            data = buffer.get()
-            n_rows, n_envs = data.rewards.shape
-            observations = obs_as_tensor(select(data.observations, np.ones((n_rows, n_envs), dtype=bool)), self.device)
-            with th.no_grad():
-                q_values = self.policy.bootstrap_net(observations).cpu().numpy().reshape(n_rows, n_envs, -1)[rows, envs]
-        return self._sarsa_values(q_values, buffer.actions[rows, envs])
+            return self._sarsa_values(last_step_q[envs], buffer.actions[rows, envs])
+        return self._stored_values()[rows, envs]
+
+    def _stored_values(self) -> np.ndarray:
+        """
+        :return: q̂(S_t, A_t) (SARSA) or Σ_a π(a|S_t) q̂(S_t, a) (Expected SARSA) of every stored step t, with the
+            bootstrap network, shape (n_steps_stored, n_envs), float32. One forward pass over the whole buffer,
+            whatever rows are needed, so that a seeded run repeats to the last bit
+        """
+        data = self.rollout_buffer.get()
+        n_rows, n_envs = data.rewards.shape
+        observations = obs_as_tensor(select(data.observations, np.ones((n_rows, n_envs), dtype=bool)), self.device)
+        with th.no_grad():
+            q_values = self.policy.bootstrap_net(observations).cpu().numpy()
+        return self._sarsa_values(q_values, data.actions.reshape(-1)).reshape(n_rows, n_envs)
 
     def _last_step_q_values(self) -> np.ndarray | None:
         """
@@ -563,7 +593,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         :return: whether it made the update (False: ``train()`` goes on with the general case, e.g. at an episode's
             end, where several transitions complete together, or before n steps have been taken)
         """
-        if not (self.n_envs == 1 and self.train_freq == 1 and self.gradient_steps == 1):
+        if not (self.n_envs == 1 and self.train_freq == 1 and self.gradient_steps == 1 and self.td_lambda == 1.0):
             return False
         last_step_q = self._last_step_q_values()  # (None unless per-step, without a bootstrap network)
         buffer = self.rollout_buffer
