@@ -20,6 +20,7 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
+from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.utils import FloatSchedule, LinearSchedule
 from stable_baselines3.common.vec_env import DummyVecEnv
@@ -342,6 +343,33 @@ def test_sarsa_logs_every_128_env_steps_per_env_by_default(tmp_path: Path, train
     model.learn(1024 - 1024 % train_freq)
     # The dumps during learn() and the one when it returns (none there if the last update was just dumped)
     assert scalars(tmp_path)["train/loss"] in (points, points + 1)
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_a_dump_reports_its_own_update_and_no_step_twice(model_class: type[BaseAlgorithm]) -> None:
+    """
+    Dumping before the update (SB3's on-policy order) logged the previous update's train/ values, and when the run
+    ended on a dump, the final dump wrote the same step again.
+    """
+    model = make_model(model_class, seed=0)
+    model.set_logger(configure(None, []))
+    updates: list[tuple[int, int]] = []  # (env steps, n_updates) after each update
+    dumps: list[tuple[int, int]] = []  # the same, as each dump wrote them
+    train, dump = model.train, model.logger.dump
+
+    def counted_train() -> None:
+        train()
+        updates.append((model.num_timesteps, model._n_updates))
+
+    def recorded_dump(step: int = 0) -> None:
+        dumps.append((step, model.logger.name_to_value["train/n_updates"]))
+        dump(step)
+
+    model.train = counted_train  # type: ignore[method-assign]
+    model.logger.dump = recorded_dump  # type: ignore[method-assign]
+    model.learn(1024, log_interval=2)
+    assert len(updates) % 2 == 0, "the run must end on a dump for the second check"
+    assert dumps == updates[1::2]
 
 
 @pytest.mark.parametrize(("update_mode", "n_envs"), [("batch", 2), ("per_step", 1), ("per_step", 2)])

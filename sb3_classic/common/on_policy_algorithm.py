@@ -458,13 +458,15 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
                 break
             iteration += 1
             self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
+            self.train()
+            # After the update (SB3's on-policy algorithms dump before it): a dump's train/ values are those of the
+            # rollout it reports, and no step is dumped twice
             if log_interval is not None and iteration % log_interval == 0:
                 self.dump_logs(iteration)
-            self.train()
 
         if log_interval is not None and self.logger.name_to_value:
-            # What was recorded since the last dump (at least the last update's train/ values) is in the logs when
-            # learn() returns, however short the run (log_interval=None: no dumps at all, as in SB3)
+            # What was recorded since the last dump is in the logs when learn() returns, however short the run
+            # (log_interval=None: no dumps at all, as in SB3)
             self.dump_logs(iteration)
         callback.on_training_end()
         return self

@@ -198,8 +198,8 @@ def truncated_lambda_returns(
 
     G^λ_{t:h} = (1 − λ) Σ_{k=1}^{h−t−1} λ^{k−1} G_{t:t+k} + λ^{h−t−1} G_{t:h},
 
-    the window's k-step returns averaged with weights λ^{k−1}: λ = 1 gives the n-step return G_{t:t+n} (eq. 10.4),
-    λ = 0 the one-step return. Computed backwards through each window with the recursion
+    the window's k-step returns averaged with weights (1 − λ)λ^{k−1}, and λ^{h−t−1} for the longest: λ = 1 gives the
+    n-step return G_{t:t+n} (eq. 10.4), λ = 0 the one-step return. Computed backwards through each window with the recursion
     G^λ_{k:h} = R_{k+1} + γ[(1 − λ) q̂(S_{k+1}, A_{k+1}) + λ G^λ_{k+1:h}] from G^λ_{h−1:h} = R_h + γ × (the window's
     bootstrap value), in float64, vectorised over the windows (a loop over k < n). CleanRL's PQN uses the same
     recursion over whole rollouts (Q(λ), with max_a q̂).

@@ -244,9 +244,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         if self.exploration_fraction is not None and self.exploration_schedule == "exponential":
             raise ValueError(
                 f"exploration_fraction={self.exploration_fraction!r} is the linear schedule's (SB3's DQN), but "
-                "exploration_schedule is 'exponential' (the default: ε ← max(ε_final, ε · exploration_decay_rate) per "
-                "episode), which would ignore it. Pass exploration_schedule='linear' as well to decay ε linearly over "
-                "that fraction of training, or drop exploration_fraction"
+                "exploration_schedule is 'exponential' (ε ← max(ε_final, ε · exploration_decay_rate) per episode; "
+                "the constructor's default), which would ignore it. Pass exploration_schedule='linear' as well to "
+                "decay ε linearly over that fraction of training, or drop exploration_fraction"
             )
         check_range("exploration_decay_rate", self.exploration_decay_rate, 0.0, 1.0, low_open=True)
         check_choice("loss_function", self.loss_function, ("mse", "huber"))
@@ -645,7 +645,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             ``learn()`` returns
         :param tb_log_name: the name of the run for TensorBoard logging
         :param reset_num_timesteps: whether to reset ``num_timesteps`` (and the envs); the exponential ε decay and the
-            learning-rate decay counts keep going either way, a linear ε decay restarts (as SB3's DQN)
+            learning-rate decay counts keep going either way; a linear ε decay follows this call's progress, as in
+            SB3's DQN: from ``exploration_initial_eps`` again if True, from where the steps so far put it if False
         :param progress_bar: display a progress bar using tqdm and rich
         :return: the trained model
         """
