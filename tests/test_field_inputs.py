@@ -365,8 +365,8 @@ def test_a_dump_reports_its_own_update_and_no_step_twice(model_class: type[BaseA
         dumps.append((step, model.logger.name_to_value["train/n_updates"]))
         dump(step)
 
-    model.train = counted_train  # type: ignore[method-assign]
-    model.logger.dump = recorded_dump  # type: ignore[method-assign]
+    model.train = counted_train
+    model.logger.dump = recorded_dump
     model.learn(1024, log_interval=2)
     assert len(updates) % 2 == 0, "the run must end on a dump for the second check"
     assert dumps == updates[1::2]
