@@ -112,6 +112,13 @@ def test_one_window_is_the_vectorised_window_to_the_last_bit(seed: int) -> None:
         assert window.bootstrap_discount.tobytes() == windows.bootstrap_discounts[t, 0].tobytes()
 
 
+def complete_windows(traj: dict[str, np.ndarray], gamma: float, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:return: the first step, env and last step of every complete n-step window of ``traj``"""
+    windows = nstep_windows(traj["rewards"], traj["dones"], gamma, n)
+    rows, envs = np.nonzero(windows.complete)
+    return rows, envs, windows.stop_rows[rows, envs]
+
+
 @pytest.mark.parametrize("seed", range(15))
 @pytest.mark.parametrize(("n", "lam"), [(1, 0.5), (3, 0.0), (4, 0.5), (6, 0.8), (10, 0.3)])
 def test_truncated_lambda_returns_match_the_books_weighted_sum(seed: int, n: int, lam: float) -> None:
@@ -119,9 +126,7 @@ def test_truncated_lambda_returns_match_the_books_weighted_sum(seed: int, n: int
     rng = np.random.default_rng(seed)
     traj = random_trajectories(rng, n_steps=int(rng.integers(1, 40)), n_envs=3)
     gamma = 0.9
-    windows = nstep_windows(traj["rewards"], traj["dones"], gamma, n)
-    rows, envs = np.nonzero(windows.complete)
-    stop_rows = windows.stop_rows[rows, envs]
+    rows, envs, stop_rows = complete_windows(traj, gamma, n)
     next_values = bootstrap_values(traj, unknown=0.0)
     returns = truncated_lambda_returns(traj["rewards"], next_values, rows, envs, stop_rows, gamma, lam)
     expected = {env: reference_lambda_targets(traj, env, gamma, n, lam) for env in range(3)}
@@ -136,9 +141,7 @@ def test_truncated_lambda_returns_are_the_nstep_and_one_step_returns_at_1_and_0(
     traj = random_trajectories(rng, n_steps=30, n_envs=2)
     gamma, n = 0.95, 5
     next_values = bootstrap_values(traj, unknown=0.0)
-    windows = nstep_windows(traj["rewards"], traj["dones"], gamma, n)
-    rows, envs = np.nonzero(windows.complete)
-    stop_rows = windows.stop_rows[rows, envs]
+    rows, envs, stop_rows = complete_windows(traj, gamma, n)
     nstep, _ = nstep_targets(traj["rewards"], traj["dones"], next_values, gamma, n)
     lam_1 = truncated_lambda_returns(traj["rewards"], next_values, rows, envs, stop_rows, gamma, 1.0)
     np.testing.assert_allclose(lam_1, nstep[rows, envs], rtol=1e-5, atol=1e-5)
