@@ -19,7 +19,7 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from sb3_classic import REINFORCE, NStepSARSA
+from sb3_classic import REINFORCE, NStepSARSA, TileCoding
 
 N_ACTIONS, N_FEATURES = 3, 4
 # Episodes of 1 to 9 steps: shorter and longer than n, and a one-step episode
@@ -72,7 +72,7 @@ def weights(layer: Any) -> np.ndarray:
 
 
 def linear_sgd(**policy_kwargs: Any) -> dict[str, Any]:
-    return dict(net_arch=[], with_bias=False, optimizer_class=th.optim.SGD, **policy_kwargs)
+    return dict(net_arch=[], with_bias=False, optimizer_class=th.optim.SGD) | policy_kwargs
 
 
 # --- n-step SARSA (S&B §10.2) ----------------------------------------------------------------------------------------
@@ -174,6 +174,85 @@ def test_the_book_loops_update_is_train_to_the_last_bit(kwargs: dict[str, Any], 
     general, general_log = run()
     assert all(th.equal(a, b) for a, b in zip(fast, general, strict=True))
     assert fast_log == general_log
+
+
+def _linear_sarsa_runs(make: Any, steps: int, monkeypatch: pytest.MonkeyPatch) -> tuple[int, list[tuple[Any, ...]]]:
+    """
+    Train ``make()`` for ``steps`` env steps twice: with the linear SGD update applied directly (``_linear_sgd_step``)
+    and through autograd and ``torch.optim.SGD`` (the direct update switched off).
+
+    :return: the direct updates made in the first run, and each run's parameters and last log
+    """
+    calls = [0]
+    direct = NStepSARSA._linear_sgd_step
+
+    def counted(self: NStepSARSA, *args: Any) -> Any:
+        calls[0] += 1
+        return direct(self, *args)
+
+    runs = []
+    for switched_off in (False, True):
+        if switched_off:
+            monkeypatch.setattr(NStepSARSA, "_plain_sgd_linear_layer", lambda self: None)
+        else:
+            monkeypatch.setattr(NStepSARSA, "_linear_sgd_step", counted)
+        model = make()
+        model.learn(steps)
+        runs.append(([p.detach().clone() for p in model.policy.parameters()], dict(model.logger.name_to_value)))
+    return calls[0], runs
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [dict(n_steps=4), dict(n_steps=1, expected_sarsa=True, with_bias=True), dict(n_steps=3, train_freq=4)],
+    ids=["n=4", "n=1 expected, bias", "n=3 train_freq=4"],
+)
+def test_direct_linear_sgd_update_is_autograds_to_the_last_bit(
+    kwargs: dict[str, Any], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """
+    The per-step mode's update of a linear q̂ with plain SGD, applied to W_a without autograd (issue 12's speed), gives
+    the parameters and the log of autograd and ``torch.optim.SGD`` bit for bit: over tile coding on Mountain Car (the
+    book's Figs 10.1–10.4), with a bias, Expected SARSA and updates of several transitions at once.
+    """
+    settings = dict(train_freq=1) | kwargs
+    with_bias = settings.pop("with_bias", False)
+    tiles = dict(n_tilings=8, tiles_per_dim=8, low=(-1.2, -0.07), high=(0.5, 0.07))
+
+    def make() -> NStepSARSA:
+        return NStepSARSA(
+            "MlpPolicy", "MountainCar-v0", learning_rate=0.3 / 8, gradient_steps=1, update_mode="per_step", gamma=1.0,
+            exploration_initial_eps=0.1, exploration_final_eps=0.1,
+            policy_kwargs=linear_sgd(
+                with_bias=with_bias, weight_init=0.0, features_extractor_class=TileCoding, features_extractor_kwargs=tiles
+            ),
+            seed=3, device="cpu", **settings,
+        )  # fmt: skip
+
+    direct_updates, (fast, general) = _linear_sarsa_runs(make, 1200, monkeypatch)
+    assert direct_updates > 1000
+    assert all(th.equal(a, b) for a, b in zip(fast[0], general[0], strict=True))
+    assert fast[1] == general[1]
+    assert fast[0][0].abs().max() > 0.1, "the weights should have moved"
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        dict(policy_kwargs=linear_sgd(optimizer_kwargs=dict(momentum=0.9))),
+        dict(policy_kwargs=linear_sgd(optimizer_kwargs=dict(weight_decay=1e-3))),
+        dict(policy_kwargs=linear_sgd(), max_grad_norm=1.0),
+        dict(policy_kwargs=linear_sgd(), loss_function="huber"),
+        dict(policy_kwargs=dict(net_arch=[], with_bias=False)),  # Adam
+        dict(policy_kwargs=dict(net_arch=[8], optimizer_class=th.optim.SGD)),  # not linear
+    ],
+    ids=["momentum", "weight decay", "clipping", "huber", "adam", "hidden layer"],
+)
+def test_direct_linear_update_only_where_it_is_sgds(kwargs: dict[str, Any]) -> None:
+    """Anything beyond a linear q̂, plain SGD and the MSE loss goes through autograd and the optimizer."""
+    assert NStepSARSA("MlpPolicy", vec(FeatureEpisodes(LENGTHS)), **kwargs)._plain_sgd_linear_layer() is None
+    plain = NStepSARSA("MlpPolicy", vec(FeatureEpisodes(LENGTHS)), policy_kwargs=linear_sgd())
+    assert plain._plain_sgd_linear_layer() is plain.policy.q_net.q_net[0]
 
 
 def test_batch_mode_differs_from_the_book_at_episode_ends() -> None:

@@ -400,10 +400,15 @@ def test_sarsa_logs_the_means_of_its_updates_predictions_and_targets(update_mode
     assert dumped["train/target_mean"] == pytest.approx(float(targets.double().mean()), rel=1e-6)
 
 
-@pytest.mark.parametrize("log_interval", [0, -1, 2.5])
-def test_sarsa_refuses_a_log_interval_that_is_not_a_count(log_interval: Any) -> None:
-    model = make_model(NStepSARSA, seed=0)
-    with pytest.raises(ValueError, match=r'log_interval=.*"auto"'):
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+@pytest.mark.parametrize("log_interval", [0, -1, 2.5, "every"])
+def test_a_log_interval_that_is_not_a_count_is_refused_before_training(
+    model_class: type[BaseAlgorithm], log_interval: Any
+) -> None:
+    """SB3's loop would divide by it after the first rollout (REINFORCE: ZeroDivisionError), with the work done lost."""
+    model = make_model(model_class, seed=0)
+    expected = r'log_interval=.*"auto"' if model_class is NStepSARSA else r"log_interval=.* or None \(no dumps\)"
+    with pytest.raises(ValueError, match=expected):
         model.learn(100, log_interval=log_interval)
     assert model.num_timesteps == 0
 

@@ -446,6 +446,13 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,
     ) -> SelfClassicOnPolicyAlgorithm:
+        if log_interval is not None:
+            # Before anything is set up: SB3's loop would divide by it after the first rollout
+            check_positive_int(
+                "log_interval",
+                log_interval,
+                hint=f"Pass the updates between two logger dumps{self._log_interval_choices()} or None (no dumps)",
+            )
         iteration = 0
         total_timesteps, callback = self._setup_learn(
             total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar
@@ -470,6 +477,10 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
             self.dump_logs(iteration)
         callback.on_training_end()
         return self
+
+    def _log_interval_choices(self) -> str:
+        """:return: the values of ``learn(log_interval=...)`` beyond a count and None, for its error message"""
+        return ""
 
     def _setup_learn(
         self,

