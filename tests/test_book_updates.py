@@ -253,6 +253,9 @@ def test_direct_linear_update_only_where_it_is_sgds(kwargs: dict[str, Any]) -> N
     assert NStepSARSA("MlpPolicy", vec(FeatureEpisodes(LENGTHS)), **kwargs)._plain_sgd_linear_layer() is None
     plain = NStepSARSA("MlpPolicy", vec(FeatureEpisodes(LENGTHS)), policy_kwargs=linear_sgd())
     assert plain._plain_sgd_linear_layer() is plain.policy.q_net.q_net[0]
+    # A q̂ whose layers were replaced after construction is not updated through the old layer
+    plain.policy.q_net.q_net = th.nn.Sequential(th.nn.Linear(N_FEATURES, N_ACTIONS, bias=False))
+    assert plain._plain_sgd_linear_layer() is None
 
 
 def test_batch_mode_differs_from_the_book_at_episode_ends() -> None:
