@@ -159,10 +159,10 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         None otherwise. Its gradient is then ∇_{W_a} q̂(s, a, w) = x(s) (S&B §9.4, after eq. 9.8), so that the SGD update
         is w ← w + α[U − q̂]x(s) (eq. 9.9), which ``NStepSARSA`` applies without autograd.
         """
-        layer = self.__dict__["_linear_layer"]
+        layer: nn.Linear | None = self.__dict__["_linear_layer"]
         # (None if q̂'s layers were replaced since construction)
         modules = self.q_net.q_net._modules
-        return layer if len(modules) == 1 and modules.get("0") is layer else None
+        return layer if layer is not None and len(modules) == 1 and modules.get("0") is layer else None
 
     @property
     def bootstrap_net(self) -> QNetwork:
