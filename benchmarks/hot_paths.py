@@ -6,7 +6,9 @@ can re-run the numbers behind those choices on their own machine:
   batch of the tuned settings on 8 envs; ``NStepSARSA.train`` takes 8 per update) with each Adam implementation:
   the loop over parameter tensors (PyTorch's default on CPU), ``foreach`` and ``fused`` (sb3_classic's default);
 - **REINFORCE's action sampling** in the rollout loop, for 1 and 8 envs: SB3's ``get_distribution(obs).get_actions()``
-  against ``REINFORCEPolicy.sample_actions`` (the same draw, without building a ``torch.distributions`` object).
+  against ``REINFORCEPolicy.sample_actions`` (the same draw, without building a ``torch.distributions`` object);
+- **NStepSARSA's per-step update of a linear q̂** over tile coding with plain SGD (the book's Figs 10.1–10.4), through
+  autograd and ``torch.optim.SGD`` against the same update applied to the weights directly (``_linear_sgd_step``).
 
 Timed with ``torch.utils.benchmark`` (one thread, CPU).
 
@@ -14,6 +16,7 @@ Timed with ``torch.utils.benchmark`` (one thread, CPU).
 """
 
 import argparse
+import functools
 import shlex
 import sys
 from collections.abc import Callable, Sequence
@@ -30,7 +33,7 @@ from torch.utils.benchmark import Timer
 from benchmarks.common import DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR
 from benchmarks.report import markdown_table
 from benchmarks.throughput import NET_ARCH
-from sb3_classic import REINFORCE, NStepSARSA
+from sb3_classic import REINFORCE, NStepSARSA, TileCoding
 from sb3_classic.harness.common import code_versions
 
 #: The Adam implementations compared, as the ``optimizer_kwargs`` that choose them (sb3_classic's default: none)
@@ -39,6 +42,8 @@ ADAM_VARIANTS = {
     "Adam, foreach": dict(foreach=True),
     "Adam, fused (sb3_classic's default)": {},
 }
+#: The env of the linear update's path: Mountain Car, as in the book's Figs 10.1–10.4
+LINEAR_ENV_ID = "MountainCar-v0"
 #: Transitions per update of the tuned NStepSARSA settings: train_freq 16 × 8 envs
 BATCH_SIZE = 128
 HEADER = f"""Median µs per call (`torch.utils.benchmark`, 1 thread, CPU), networks `net_arch={NET_ARCH}`.
@@ -47,6 +52,10 @@ HEADER = f"""Median µs per call (`torch.utils.benchmark`, 1 thread, CPU), netwo
   batch of the tuned settings on 8 envs; `NStepSARSA.train` takes 8 per update), with each Adam implementation.
 - *REINFORCE action sampling*: the actions of the rollout loop, with SB3's `get_distribution(obs).get_actions()` and
   with `REINFORCEPolicy.sample_actions(obs)`, which makes the same draw.
+
+- *NStepSARSA per-step linear update*: one transition's update W_a ← W_a + α[G − q̂]x(S) of a linear q̂ over the tile
+  coding of Figs 10.1–10.4 (Mountain Car, 8 tilings of 8 × 8), plain SGD: through autograd and `torch.optim.SGD`, and
+  applied directly (the same weights to the last bit).
 
 Speed-up: the first variant of each path divided by this one."""
 
@@ -97,6 +106,28 @@ def reinforce_samplers(env_id: str, n_envs: int) -> dict[str, Callable[[], th.Te
     return {"SB3: get_distribution(obs).get_actions()": sb3, "REINFORCEPolicy.sample_actions(obs)": ours}
 
 
+def linear_sgd_updates() -> dict[str, Callable[[], None]]:
+    """:return: one per-step update of a linear q̂ over tile coding with plain SGD, through autograd and directly"""
+    tiles = dict(n_tilings=8, tiles_per_dim=8, low=(-1.2, -0.07), high=(0.5, 0.07))
+    policy_kwargs = dict(
+        net_arch=[], with_bias=False, weight_init=0.0, optimizer_class=th.optim.SGD,
+        features_extractor_class=TileCoding, features_extractor_kwargs=tiles,
+    )  # fmt: skip
+    updates: dict[str, Callable[[], None]] = {}
+    for variant, direct in (("autograd + torch.optim.SGD", False), ("applied directly (sb3_classic's)", True)):
+        model = NStepSARSA(
+            "MlpPolicy", LINEAR_ENV_ID, learning_rate=0.3 / 8, update_mode="per_step", policy_kwargs=policy_kwargs,
+            seed=0, device="cpu",
+        )  # fmt: skip
+        if not direct:
+            model._plain_sgd_linear_layer = lambda: None  # type: ignore[method-assign]
+        # One transition: an observation, its action and its target (the weights move at every call, as in training)
+        updates[variant] = functools.partial(
+            model._gradient_step, observation_batch(model, 1), th.tensor([[1]]), th.tensor([-3.0])
+        )  # type: ignore[assignment]
+    return updates
+
+
 def run_hot_paths(env_ids: Sequence[str], min_run_time: float) -> pd.DataFrame:
     """
     :param env_ids: the envs whose spaces size the networks
@@ -111,13 +142,16 @@ def run_hot_paths(env_ids: Sequence[str], min_run_time: float) -> pd.DataFrame:
         paths: dict[str, dict[str, Callable[[], Any]]] = {"NStepSARSA gradient step": steps}
         for n_envs in (1, 8):
             paths[f"REINFORCE action sampling, {n_envs} env{'s' * (n_envs > 1)}"] = reinforce_samplers(env_id, n_envs)
+        if env_id == env_ids[-1]:
+            paths["NStepSARSA per-step linear update"] = linear_sgd_updates()
         for path, variants in paths.items():
+            path_env = LINEAR_ENV_ID if path == "NStepSARSA per-step linear update" else env_id
             baseline = None
             for variant, function in variants.items():
                 micros = time_call(function, min_run_time)
                 if baseline is None:
                     baseline = micros
-                rows.append({"path": path, "env_id": env_id, "variant": variant, "us": micros, "speedup": baseline / micros})
+                rows.append({"path": path, "env_id": path_env, "variant": variant, "us": micros, "speedup": baseline / micros})
     return pd.DataFrame(rows)
 
 

@@ -306,7 +306,10 @@ def test_hot_paths_command_line(tmp_path: Path) -> None:
     # 3 Adam implementations, then SB3's and REINFORCE's sampling for 1 and for 8 envs
     assert len(rows) == len(hot_paths.ADAM_VARIANTS) + 4
     assert [row[-1] for row in rows if row[2].startswith(("Adam, loop", "SB3"))] == ["1.00× |"] * 3
-    assert all(float(row[3]) > 0 for row in rows)
+    # Then the linear update of Mountain Car's tile coding, through autograd and directly
+    linear = [line.split(" | ") for line in lines if "MountainCar-v0" in line]
+    assert [row[2] for row in linear] == ["autograd + torch.optim.SGD", "applied directly (sb3_classic's)"]
+    assert all(float(row[3]) > 0 for row in rows + linear)
 
 
 def test_run_one_trains_once_and_caches(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
