@@ -1,5 +1,5 @@
 """
-Microbenchmarks of the two hot paths where sb3_classic departs from SB3's and PyTorch's defaults, so that a reader
+Microbenchmarks of the three hot paths where sb3_classic departs from SB3's and PyTorch's defaults, so that a reader
 can re-run the numbers behind those choices on their own machine:
 
 - **NStepSARSA's gradient step** (forward, loss, backward and Adam step of a 64×64 Q-network on 128 transitions, the
