@@ -1,4 +1,7 @@
-"""NStepSARSA's options for neural networks that are not in the book: a bootstrap (target) network and LayerNorm."""
+"""
+NStepSARSA's options for neural networks that are not in the book: a bootstrap (target) network, a weight-averaged
+greedy policy and LayerNorm.
+"""
 
 from pathlib import Path
 from typing import Any
@@ -14,11 +17,10 @@ from sb3_classic import NStepSARSA
 from sb3_classic.common.returns import nstep_targets
 
 
-def make(**kwargs: Any) -> NStepSARSA:
-    env = make_vec_env("CartPole-v1", n_envs=2, seed=0)
-    return NStepSARSA(
-        "MlpPolicy", env, policy_kwargs=dict(net_arch=[16]), n_steps=3, train_freq=8, seed=0, device="cpu", **kwargs
-    )
+def make(n_envs: int = 2, **kwargs: Any) -> NStepSARSA:
+    env = make_vec_env("CartPole-v1", n_envs=n_envs, seed=0)
+    settings = dict(policy_kwargs=dict(net_arch=[16]), n_steps=3, train_freq=8, seed=0, device="cpu") | kwargs
+    return NStepSARSA("MlpPolicy", env, **settings)
 
 
 def flat(module: nn.Module) -> th.Tensor:
@@ -100,6 +102,75 @@ def test_target_network_is_saved_and_loaded(tmp_path: Path) -> None:
 def test_bad_target_arguments(name: str, value: float) -> None:
     with pytest.raises(ValueError, match=name):
         make(**{name: value})
+
+
+@pytest.mark.parametrize("update_mode", ["batch", "per_step"])
+def test_the_average_follows_q_after_every_update_and_leaves_training_alone(update_mode: str) -> None:
+    """w̄ ← τw + (1 − τ)w̄ after each update (both modes, the per-step loop's own update included), from q̂'s initial
+    weights; the online weights and the ε-greedy actions are those of a run without the average, bit for bit."""
+    # The per-step loop's own update (_book_loop_step) needs one env and train_freq=1
+    tau = 0.2
+    settings: dict[str, Any] = dict(update_mode=update_mode)
+    if update_mode == "per_step":
+        settings.update(n_envs=1, train_freq=1, gradient_steps=1)
+    model = make(averaging_tau=tau, **settings)
+    average = model.policy.q_net_average
+    assert average is not None
+    assert th.equal(flat(average), flat(model.policy.q_net))
+    assert not any(p.requires_grad for p in average.parameters())
+    trained = {id(p) for group in model.policy.optimizer.param_groups for p in group["params"]}
+    assert not trained & {id(p) for p in average.parameters()}
+    expected = flat(model.policy.q_net)
+    n_updates = [0]
+    update_average = model._update_average
+
+    def recorded() -> None:
+        nonlocal expected
+        update_average()
+        expected = tau * flat(model.policy.q_net) + (1 - tau) * expected
+        n_updates[0] += 1
+
+    model._update_average = recorded  # type: ignore[method-assign]
+    model.learn(200)
+    # batch: an update every 16 env steps (8 per env, 2 envs); per step: one after almost every env step
+    assert n_updates[0] >= (10 if update_mode == "batch" else 150)
+    np.testing.assert_allclose(flat(average).numpy(), expected.numpy(), rtol=1e-5, atol=1e-6)
+    assert not th.equal(flat(average), flat(model.policy.q_net))
+    plain = make(**settings).learn(200)
+    assert th.equal(flat(plain.policy.q_net), flat(model.policy.q_net))
+
+
+def test_predict_is_greedy_in_the_average(tmp_path: Path) -> None:
+    """``predict(deterministic=True)`` (every evaluation) takes argmax of the average, and the average is saved."""
+    model = make(averaging_tau=0.05).learn(100)
+    average = model.policy.q_net_average
+    assert average is not None
+    obs = np.random.default_rng(0).normal(size=(64, 4)).astype(np.float32)
+    with th.no_grad():
+        # Make the two networks disagree: the average prefers action 1 everywhere, q̂ action 0
+        average.q_net[-1].bias.copy_(th.tensor([-1e3, 1e3]))
+        model.policy.q_net.q_net[-1].bias.copy_(th.tensor([1e3, -1e3]))
+    np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], np.ones(64))
+    model.exploration_rate = 0.0
+    with th.no_grad():  # as in the rollout loop
+        np.testing.assert_array_equal(model._sample_actions(th.as_tensor(obs)), np.zeros(64), "the behaviour policy is q̂'s")
+    model.save(tmp_path / "model")
+    loaded = NStepSARSA.load(tmp_path / "model", device="cpu")
+    assert loaded.policy.q_net_average is not None
+    assert th.equal(flat(loaded.policy.q_net_average), flat(average))
+    np.testing.assert_array_equal(loaded.predict(obs, deterministic=True)[0], np.ones(64))
+
+
+def test_no_average_by_default() -> None:
+    model = make()
+    assert model.policy.q_net_average is None
+    assert model.policy.greedy_net is model.policy.q_net
+
+
+@pytest.mark.parametrize("value", [0.0, 1.5, -0.1])
+def test_bad_averaging_tau(value: float) -> None:
+    with pytest.raises(ValueError, match="averaging_tau"):
+        make(averaging_tau=value)
 
 
 @pytest.mark.parametrize("with_bias", [True, False])

@@ -32,6 +32,7 @@ _POLICY_ARGUMENTS = {
     "value_lr_schedule",
     "use_baseline",
     "target_network",
+    "averaged_network",
 }
 
 

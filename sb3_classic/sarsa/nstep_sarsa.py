@@ -114,6 +114,10 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     :param target_update_interval: bootstrap from a copy of q̂ (``policy.q_net_target``) moved towards q̂ every this
         many env steps (all envs together), by ``tau``; None bootstraps from q̂ itself, as the book does
     :param tau: the soft update coefficient of the copy ("Polyak update", between 0 and 1; 1 copies q̂)
+    :param averaging_tau: the greedy policy of ``predict`` (and so of every evaluation) from a Polyak average of q̂'s
+        weights, w̄ ← τw + (1 − τ)w̄ after every update, with this τ (``policy.q_net_average``; weight averaging as in
+        Nikishin et al. 2018, "Improving Stability in Deep Reinforcement Learning with Weight Averaging"); training
+        and the ε-greedy behaviour policy are unchanged. None (the default, the book's): the greedy policy is q̂'s
     :param loss_function: ``"mse"`` (½(G − q̂)², the book's update) or ``"huber"`` (the same within 1 of the target,
         linear beyond)
     :param max_grad_norm: clip the gradient norm to this; None for no clipping
@@ -162,6 +166,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         exploration_decay_rate: float = 0.995,
         target_update_interval: int | None = None,
         tau: float = 1.0,
+        averaging_tau: float | None = None,
         loss_function: str = "mse",
         max_grad_norm: float | None = None,
         lr_decay_factor: float = 1.0,
@@ -212,6 +217,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self.exploration_decay_rate = exploration_decay_rate
         self.target_update_interval = target_update_interval
         self.tau = tau
+        self.averaging_tau = averaging_tau
         # Env steps at the last move of the bootstrap network towards q̂
         self._target_updated_at = 0
         self.loss_function = loss_function
@@ -257,6 +263,15 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         if self.target_update_interval is not None:
             check_positive_int("target_update_interval", self.target_update_interval, hint="or None for no target network")
         check_range("tau", self.tau, 0.0, 1.0, low_open=True, hint="1.0 copies q̂ at every target update")
+        if self.averaging_tau is not None:
+            check_range(
+                "averaging_tau",
+                self.averaging_tau,
+                0.0,
+                1.0,
+                low_open=True,
+                hint="e.g. 0.05 (an average over about 20 updates), or None for the greedy policy of q̂ itself",
+            )
 
     def _initial_buffer_size(self) -> int:
         # At most n_steps transitions per env wait for their targets between updates
@@ -279,7 +294,12 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     def _make_policy(self) -> BasePolicy:
         target_network = self.target_update_interval is not None
         return self.policy_class(
-            self.observation_space, self.action_space, self.lr_schedule, target_network=target_network, **self.policy_kwargs
+            self.observation_space,
+            self.action_space,
+            self.lr_schedule,
+            target_network=target_network,
+            averaged_network=self.averaging_tau is not None,
+            **self.policy_kwargs,
         )
 
     def _update_exploration_rate(self) -> None:
@@ -616,8 +636,16 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             # w⁻ ← τ w + (1 − τ) w⁻ (SB3's DQN; not in the book)
             polyak_update(self.policy.q_net.parameters(), target.parameters(), self.tau)
             self._target_updated_at = self.num_timesteps
+        self._update_average()
         self._n_updates += self.gradient_steps * len(chunks)
         self._record_update(loss, q_first[0] if len(q_first) == 1 else th.cat(q_first), batch.targets)
+
+    def _update_average(self) -> None:
+        """After an update: w̄ ← τw + (1 − τ)w̄ of the greedy policy's average (``averaging_tau``), if there is one."""
+        average = self.policy.q_net_average
+        if average is not None and self.averaging_tau is not None:
+            # w̄ ← τ w + (1 − τ) w̄ (SB3's polyak_update; not in the book)
+            polyak_update(self.policy.q_net.parameters(), average.parameters(), self.averaging_tau)
 
     def _record_update(self, loss: th.Tensor, q_predicted: th.Tensor, targets: th.Tensor) -> None:
         """
@@ -665,6 +693,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         observation = obs_as_tensor(select(buffer.observations, (slice(start, start + 1), 0)), self.device)
         action = th.as_tensor(buffer.actions[start : start + 1, 0].reshape(-1, 1), device=self.device)
         q_predicted, loss = self._gradient_step(observation, action, target)
+        self._update_average()
         buffer.mark_trained(1)
         self._n_updates += 1
         self._record_update(loss, q_predicted, target)

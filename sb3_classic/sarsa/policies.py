@@ -52,6 +52,9 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         from drifting)
     :param target_network: also build ``q_net_target``, a copy of q̂ that NStepSARSA bootstraps from and moves towards
         q̂ every ``target_update_interval`` steps (SB3's DQN); the book bootstraps from q̂ itself
+    :param averaged_network: also build ``q_net_average``, a Polyak average of q̂'s weights that ``NStepSARSA`` updates
+        after every update (``averaging_tau``) and that the greedy policy of ``predict`` uses (weight averaging for a
+        stable greedy policy, Nikishin et al. 2018); the book's greedy policy is q̂'s own
     :param features_extractor_class: features extractor to use
     :param features_extractor_kwargs: keyword arguments to pass to the features extractor
     :param normalize_images: whether to divide images by 255
@@ -75,6 +78,7 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         with_bias: bool = True,
         layer_norm: bool = False,
         target_network: bool = False,
+        averaged_network: bool = False,
         features_extractor_class: type[BaseFeaturesExtractor] = FlattenExtractor,
         features_extractor_kwargs: dict[str, Any] | None = None,
         normalize_images: bool = True,
@@ -105,6 +109,7 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         self.with_bias = with_bias
         self.layer_norm = layer_norm
         self.target_network = target_network
+        self.averaged_network = averaged_network
 
         features_extractor = self.make_features_extractor()
         self.q_net = QNetwork(
@@ -148,6 +153,11 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             self.q_net_target = copy.deepcopy(self.q_net)
             self.q_net_target.requires_grad_(False)
             self.q_net_target.set_training_mode(False)
+        self.q_net_average: QNetwork | None = None
+        if averaged_network:
+            self.q_net_average = copy.deepcopy(self.q_net)
+            self.q_net_average.requires_grad_(False)
+            self.q_net_average.set_training_mode(False)
         optimizer_kwargs = optimizer_kwargs_with_defaults(self.optimizer_class, self.optimizer_kwargs)
         self.optimizer = self.optimizer_class(self.q_net.parameters(), lr=lr_schedule(1), **optimizer_kwargs)  # type: ignore[call-arg]
 
@@ -173,8 +183,13 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         """:return: the greedy actions argmax_a q̂(obs, a)"""
         return self._predict(obs, deterministic=deterministic)
 
+    @property
+    def greedy_net(self) -> QNetwork:
+        """The network of the greedy policy (``predict``): ``q_net_average`` if there is one, else q̂ itself."""
+        return self.q_net if self.q_net_average is None else self.q_net_average
+
     def _predict(self, observation: PyTorchObs, deterministic: bool = True) -> th.Tensor:
-        return self.q_net._predict(observation, deterministic=deterministic)
+        return self.greedy_net._predict(observation, deterministic=deterministic)
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = super()._get_constructor_parameters()
@@ -186,6 +201,7 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             with_bias=self.with_bias,
             layer_norm=self.layer_norm,
             target_network=self.target_network,
+            averaged_network=self.averaged_network,
             lr_schedule=self._dummy_schedule,  # not needed to load the policy alone
             optimizer_class=self.optimizer_class,
             optimizer_kwargs=self.optimizer_kwargs,
