@@ -182,8 +182,9 @@ def sample_nstep_sarsa_params(
 ) -> dict[str, Any]:
     """
     Optuna search space of n-step SARSA (rl-zoo3's ``-optimize``): n, learning rate, steps and gradient steps per
-    update, γ, Expected SARSA or not, the λ of the targets, the ε schedule (exponential per episode or linear, and its
-    floor), the loss, learning-rate step decay, and the Q-network's depth, width, activation and initialisation.
+    update, γ, Expected SARSA or not, the λ of the targets, the weight average of the greedy policy, the ε schedule
+    (exponential per episode or linear, and its floor), the loss, learning-rate step decay, and the Q-network's depth,
+    width, activation and initialisation.
 
     :param trial: the Optuna trial to sample from
     :param n_actions: size of a Box action space (unused)
@@ -200,6 +201,8 @@ def sample_nstep_sarsa_params(
         "one_minus_gamma": trial.suggest_float("one_minus_gamma", 1e-4, 0.03, log=True),
         "expected_sarsa": trial.suggest_categorical("expected_sarsa", (False, True)),
         "td_lambda": trial.suggest_categorical("td_lambda", (0.3, 0.5, 0.65, 0.8, 0.9, 1.0)),
+        # The greedy policy (so the trial's evaluations) from a Polyak average of q̂'s weights, or from q̂ (None)
+        "averaging_tau": trial.suggest_categorical("averaging_tau", (None, 0.02, 0.05, 0.1, 0.2)),
         # ε ← max(ε_final, ε · rate) per episode, or linear over a fraction of training; both are sampled (without
         # conditional parameters, multivariate TPE samples jointly) and the one of the schedule not chosen is dropped
         "exploration_schedule": trial.suggest_categorical("exploration_schedule", ("exponential", "linear")),

@@ -63,6 +63,7 @@ SEARCH_SPACES = {
     "reinforce": COMMON_SPACE | {"learning_rate", "value_learning_rate", "n_episodes", "normalize_advantage", "ent_coef"},
     "nstep_sarsa": COMMON_SPACE
     | {"n_steps", "learning_rate", "train_freq", "gradient_steps", "expected_sarsa", "td_lambda", "loss_function"}
+    | {"averaging_tau"}
     | {"exploration_schedule", "exploration_decay_rate", "exploration_fraction", "exploration_final_eps"},
 }
 

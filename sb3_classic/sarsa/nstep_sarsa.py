@@ -69,8 +69,10 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
 
     Options that are not in §10.2's algorithm, for neural networks (all off by default, so the book's algorithm is the
     default): a slowly-moving bootstrap network (``target_update_interval``, ``tau``: SB3's DQN names), truncated
-    λ-returns G^λ_{t:t+n} as targets (``td_lambda``, §12.3; CleanRL's PQN uses λ-returns), and LayerNorm in the
-    Q-network (``policy_kwargs=dict(layer_norm=True)``, as PQN).
+    λ-returns G^λ_{t:t+n} as targets (``td_lambda``, §12.3; CleanRL's PQN uses λ-returns), LayerNorm in the
+    Q-network (``policy_kwargs=dict(layer_norm=True)``, as PQN), and a greedy policy (``predict``) from a Polyak
+    average of q̂'s weights (``averaging_tau``), which keeps a q̂ that passes through a bad state for an update or two
+    from showing it in evaluations (the −500 loops of Acrobot-v1's greedy policy).
 
     The greedy action breaks ties at random (as the book's ``argmax`` does), so that a q̂ initialised to a constant
     does not always pick the first action; ``predict(deterministic=True)`` picks the first of tied actions, so that it
@@ -344,7 +346,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
         """
         The greedy action (``deterministic=True``), or the ε-greedy one with the current ``exploration_rate``, as the
-        env takes it (an index plus the ``start`` of a ``Discrete(n, start=...)`` space).
+        env takes it (an index plus the ``start`` of a ``Discrete(n, start=...)`` space). Greedy in the weight average
+        ``policy.q_net_average`` with ``averaging_tau``, else in q̂.
 
         :param observation: the input observation (one, or a batch)
         :param state: unused (no recurrent policy)
