@@ -27,6 +27,15 @@ def flat(module: nn.Module) -> th.Tensor:
     return th.cat([p.detach().flatten() for p in module.parameters()])
 
 
+def assert_frozen_copy_of_q(model: NStepSARSA, copy: nn.Module | None) -> None:
+    """``copy`` is q̂ as built (same weights), without gradients and outside the optimizer."""
+    assert copy is not None
+    assert th.equal(flat(copy), flat(model.policy.q_net))
+    assert not any(p.requires_grad for p in copy.parameters())
+    trained = {id(p) for group in model.policy.optimizer.param_groups for p in group["params"]}
+    assert not trained & {id(p) for p in copy.parameters()}
+
+
 def test_no_target_network_by_default() -> None:
     model = make()
     assert model.policy.q_net_target is None
@@ -35,12 +44,7 @@ def test_no_target_network_by_default() -> None:
 
 def test_target_network_is_a_frozen_copy_outside_the_optimizer() -> None:
     model = make(target_update_interval=1000)
-    target = model.policy.q_net_target
-    assert target is not None
-    assert th.equal(flat(target), flat(model.policy.q_net))
-    assert not any(p.requires_grad for p in target.parameters())
-    trained = {id(p) for group in model.policy.optimizer.param_groups for p in group["params"]}
-    assert not trained & {id(p) for p in target.parameters()}
+    assert_frozen_copy_of_q(model, model.policy.q_net_target)
 
 
 def test_targets_bootstrap_from_the_target_network() -> None:
@@ -115,11 +119,8 @@ def test_the_average_follows_q_after_every_update_and_leaves_training_alone(upda
         settings.update(n_envs=1, train_freq=1, gradient_steps=1)
     model = make(averaging_tau=tau, **settings)
     average = model.policy.q_net_average
+    assert_frozen_copy_of_q(model, average)
     assert average is not None
-    assert th.equal(flat(average), flat(model.policy.q_net))
-    assert not any(p.requires_grad for p in average.parameters())
-    trained = {id(p) for group in model.policy.optimizer.param_groups for p in group["params"]}
-    assert not trained & {id(p) for p in average.parameters()}
     expected = flat(model.policy.q_net)
     n_updates = [0]
     update_average = model._update_average
