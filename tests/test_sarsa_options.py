@@ -17,9 +17,10 @@ from sb3_classic import NStepSARSA
 from sb3_classic.common.returns import nstep_targets
 
 
-def make(n_envs: int = 2, **kwargs: Any) -> NStepSARSA:
+def make(n_envs: Any = 2, **kwargs: Any) -> NStepSARSA:
     env = make_vec_env("CartPole-v1", n_envs=n_envs, seed=0)
-    settings = dict(policy_kwargs=dict(net_arch=[16]), n_steps=3, train_freq=8, seed=0, device="cpu") | kwargs
+    settings: dict[str, Any] = dict(policy_kwargs=dict(net_arch=[16]), n_steps=3, train_freq=8, seed=0, device="cpu")
+    settings |= kwargs
     return NStepSARSA("MlpPolicy", env, **settings)
 
 
@@ -149,8 +150,8 @@ def test_predict_is_greedy_in_the_average(tmp_path: Path) -> None:
     obs = np.random.default_rng(0).normal(size=(64, 4)).astype(np.float32)
     with th.no_grad():
         # Make the two networks disagree: the average prefers action 1 everywhere, q̂ action 0
-        average.q_net[-1].bias.copy_(th.tensor([-1e3, 1e3]))
-        model.policy.q_net.q_net[-1].bias.copy_(th.tensor([1e3, -1e3]))
+        average.q_net[-1].bias.copy_(th.tensor([-1e3, 1e3]))  # type: ignore[operator]
+        model.policy.q_net.q_net[-1].bias.copy_(th.tensor([1e3, -1e3]))  # type: ignore[operator]
     np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], np.ones(64))
     model.exploration_rate = 0.0
     with th.no_grad():  # as in the rollout loop
