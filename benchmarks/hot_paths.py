@@ -136,22 +136,22 @@ def run_hot_paths(env_ids: Sequence[str], min_run_time: float) -> pd.DataFrame:
         ``speedup`` (the first variant of the path's time divided by this one's)
     """
     th.set_num_threads(1)
-    rows = []
+    paths: list[tuple[str, str, dict[str, Callable[[], Any]]]] = []
     for env_id in env_ids:
         steps = {name: sarsa_gradient_step(env_id, kwargs) for name, kwargs in ADAM_VARIANTS.items()}
-        paths: dict[str, dict[str, Callable[[], Any]]] = {"NStepSARSA gradient step": steps}
+        paths.append(("NStepSARSA gradient step", env_id, steps))
         for n_envs in (1, 8):
-            paths[f"REINFORCE action sampling, {n_envs} env{'s' * (n_envs > 1)}"] = reinforce_samplers(env_id, n_envs)
-        if env_id == env_ids[-1]:
-            paths["NStepSARSA per-step linear update"] = linear_sgd_updates()
-        for path, variants in paths.items():
-            path_env = LINEAR_ENV_ID if path == "NStepSARSA per-step linear update" else env_id
-            baseline = None
-            for variant, function in variants.items():
-                micros = time_call(function, min_run_time)
-                if baseline is None:
-                    baseline = micros
-                rows.append({"path": path, "env_id": path_env, "variant": variant, "us": micros, "speedup": baseline / micros})
+            name = f"REINFORCE action sampling, {n_envs} env{'s' * (n_envs > 1)}"
+            paths.append((name, env_id, reinforce_samplers(env_id, n_envs)))
+    paths.append(("NStepSARSA per-step linear update", LINEAR_ENV_ID, linear_sgd_updates()))
+    rows = []
+    for path, env_id, variants in paths:
+        baseline = None
+        for variant, function in variants.items():
+            micros = time_call(function, min_run_time)
+            if baseline is None:
+                baseline = micros
+            rows.append({"path": path, "env_id": env_id, "variant": variant, "us": micros, "speedup": baseline / micros})
     return pd.DataFrame(rows)
 
 

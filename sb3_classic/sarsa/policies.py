@@ -148,16 +148,8 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         # as a submodule again (the state dict keeps its keys)
         linear = len(layers) == 1 and isinstance(output, nn.Linear) and next(features_extractor.parameters(), None) is None
         self.__dict__["_linear_layer"] = output if linear else None
-        self.q_net_target: QNetwork | None = None
-        if target_network:
-            self.q_net_target = copy.deepcopy(self.q_net)
-            self.q_net_target.requires_grad_(False)
-            self.q_net_target.set_training_mode(False)
-        self.q_net_average: QNetwork | None = None
-        if averaged_network:
-            self.q_net_average = copy.deepcopy(self.q_net)
-            self.q_net_average.requires_grad_(False)
-            self.q_net_average.set_training_mode(False)
+        self.q_net_target = self._frozen_copy() if target_network else None
+        self.q_net_average = self._frozen_copy() if averaged_network else None
         optimizer_kwargs = optimizer_kwargs_with_defaults(self.optimizer_class, self.optimizer_kwargs)
         self.optimizer = self.optimizer_class(self.q_net.parameters(), lr=lr_schedule(1), **optimizer_kwargs)  # type: ignore[call-arg]
 
@@ -173,6 +165,13 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         # (None if q̂'s layers were replaced since construction)
         modules = self.q_net.q_net._modules
         return layer if layer is not None and len(modules) == 1 and modules.get("0") is layer else None
+
+    def _frozen_copy(self) -> QNetwork:
+        """:return: a copy of q̂ as it is now, without gradients, in evaluation mode, outside the optimizer"""
+        frozen = copy.deepcopy(self.q_net)
+        frozen.requires_grad_(False)
+        frozen.set_training_mode(False)
+        return frozen
 
     @property
     def bootstrap_net(self) -> QNetwork:
