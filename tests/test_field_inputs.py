@@ -1,12 +1,13 @@
 """
 Inputs from the field that SB3 and rl-zoo3 users have reported as bugs over the years (issue 11), each with its
 neighbours: action spaces with an offset, schedules past the end of training, short runs in TensorBoard, and NaN or
-infinity from an env.
+infinity from an env; and values a YAML or another library's habit gives that would be taken silently.
 """
 
 import copy
 import glob
 import math
+import re
 from pathlib import Path
 from typing import Any, SupportsFloat
 
@@ -540,3 +541,71 @@ def test_integer_observations_are_not_checked() -> None:
     assert all_finite(np.zeros((2, 84, 84, 1), dtype=np.uint8))
     assert all_finite({"image": np.zeros((2, 4), dtype=np.uint8), "vector": np.zeros((2, 3), dtype=np.float32)})
     assert not all_finite({"image": np.zeros((2, 4), dtype=np.uint8), "vector": np.array([[0.0, np.nan]])})
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+@pytest.mark.parametrize("reset_num_timesteps", [True, False])
+def test_learn_zero_steps_returns_the_model_unchanged(model_class: type[BaseAlgorithm], reset_num_timesteps: bool) -> None:
+    # SB3's A2C and DQN return from learn(0); a ZeroDivisionError in the progress of a 0-step call was the bug
+    model = make_model(model_class, seed=0)
+    if not reset_num_timesteps:
+        model.learn(64)
+    before = copy.deepcopy(model.get_parameters())
+    steps = model.num_timesteps
+    assert model.learn(0, reset_num_timesteps=reset_num_timesteps) is model
+    assert model.num_timesteps == (steps if not reset_num_timesteps else 0)
+    assert parameters_equal(model.get_parameters(), before)
+    model.learn(64, reset_num_timesteps=False)  # and it goes on training
+
+
+# Values a YAML or a habit from another library gives, which would otherwise be taken silently or fail far from the
+# cause: each is refused at construction with the argument's name
+REFUSED_INPUTS = [
+    (REINFORCE, dict(policy_kwargs=dict(net_arch=dict(qf=[32]))), ValueError, "unknown key(s) 'qf'"),
+    (REINFORCE, dict(policy_kwargs=dict(net_arch=dict(pi=[32], vf=[0]))), ValueError, r"net_arch['vf']=[0]"),
+    (NStepSARSA, dict(policy_kwargs=dict(net_arch=64)), ValueError, "net_arch=64 must be a list"),
+    (NStepSARSA, dict(policy_kwargs=dict(net_arch=[-5])), ValueError, "integer >= 1"),
+    (NStepSARSA, dict(policy_kwargs=dict(net_arch=[0])), ValueError, "integer >= 1"),
+    (NStepSARSA, dict(policy_kwargs=dict(net_arch=[dict(pi=[32], vf=[32])])), ValueError, "integer >= 1"),
+    (NStepSARSA, dict(policy_kwargs=dict(activation_fn="relu")), TypeError, "activation_fn='relu'"),
+    (REINFORCE, dict(policy_kwargs=dict(activation_fn=th.nn.ReLU())), TypeError, "activation_fn=ReLU()"),
+    (NStepSARSA, dict(tau=0.5), ValueError, "target_update_interval is None"),
+    (NStepSARSA, dict(expected_sarsa="False"), TypeError, "expected_sarsa='False'"),
+    (NStepSARSA, dict(policy_kwargs=dict(layer_norm="true")), TypeError, "layer_norm='true'"),
+    (REINFORCE, dict(gamma_t_factor="no"), TypeError, "gamma_t_factor='no'"),
+    (REINFORCE, dict(use_baseline=0), TypeError, "use_baseline=0"),
+    (REINFORCE, dict(handle_timeout_termination="yes"), TypeError, "handle_timeout_termination='yes'"),
+    (NStepSARSA, dict(policy_kwargs=dict(with_bias="False")), TypeError, "with_bias='False'"),
+]
+
+
+@pytest.mark.parametrize(("model_class", "kwargs", "error", "message"), REFUSED_INPUTS)
+def test_inputs_that_would_be_taken_silently_are_refused(
+    model_class: type[BaseAlgorithm], kwargs: dict[str, Any], error: type[Exception], message: str
+) -> None:
+    with pytest.raises(error, match=re.escape(message)):
+        make_model(model_class, **kwargs)
+
+
+@pytest.mark.parametrize(
+    ("model_class", "kwargs"),
+    [
+        (REINFORCE, dict(policy_kwargs=dict(net_arch=dict(pi=[32], vf=[16])))),
+        (REINFORCE, dict(policy_kwargs=dict(net_arch=[]), use_baseline=np.bool_(False))),
+        (NStepSARSA, dict(policy_kwargs=dict(net_arch=(np.int64(16),), activation_fn=th.nn.Tanh))),
+        (NStepSARSA, dict(target_update_interval=10, tau=0.5, expected_sarsa=np.True_)),
+    ],
+)
+def test_their_valid_neighbours_are_accepted(model_class: type[BaseAlgorithm], kwargs: dict[str, Any]) -> None:
+    make_model(model_class, **kwargs).learn(32)
+
+
+@pytest.mark.parametrize(("saved_class", "loading_class"), [(REINFORCE, NStepSARSA), (NStepSARSA, REINFORCE)])
+def test_a_file_of_the_other_algorithm_is_named_as_such(
+    tmp_path: Path, saved_class: type[BaseAlgorithm], loading_class: type[BaseAlgorithm]
+) -> None:
+    make_model(saved_class).save(tmp_path / "model.zip")
+    with pytest.raises(TypeError, match="saved by another algorithm"):
+        loading_class.load(tmp_path / "model.zip")
+    # ... and the file itself is intact
+    assert isinstance(saved_class.load(tmp_path / "model.zip"), saved_class)

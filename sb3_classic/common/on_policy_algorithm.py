@@ -20,7 +20,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from sb3_classic.common.buffers import Observations, TrajectoryBuffer, all_finite, non_finite_entries, select
 from sb3_classic.common.policies import action_offset
 from sb3_classic.common.schedules import StepDecay
-from sb3_classic.common.utils import check_choice, check_learning_rate, check_positive_int, check_range
+from sb3_classic.common.utils import check_bool, check_choice, check_learning_rate, check_positive_int, check_range
 
 SelfClassicOnPolicyAlgorithm = TypeVar("SelfClassicOnPolicyAlgorithm", bound="ClassicOnPolicyAlgorithm")
 #: The policy's arguments the algorithm passes itself (not ``policy_kwargs``)
@@ -60,7 +60,8 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
     :param lr_decay_milestones: decay when the count of ``lr_decay_unit`` reaches each of these instead
         (like ``MultiStepLR``)
     :param lr_decay_unit: what the decay counts: ``"episode"`` (completed episodes, all envs together)
-        or ``"update"`` (gradient updates)
+        or ``"update"`` (gradient steps, as SB3's ``train/n_updates`` counts them: a SARSA update of ``gradient_steps``
+        steps counts ``gradient_steps``)
     :param handle_timeout_termination: bootstrap from the value of the final state when an episode is cut by a time
         limit (``TimeLimit.truncated``), treating the limit as not part of the task (SB3's default); if False,
         a truncation ends the return like a termination
@@ -163,6 +164,7 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
             raise ValueError(f"max_grad_norm={self.max_grad_norm!r} must be > 0, or None for no clipping")
         check_range("lr_decay_factor", self.lr_decay_factor, 0.0, 1.0, low_open=True, hint="1.0 means no decay")
         check_choice("lr_decay_unit", self.lr_decay_unit, ("episode", "update"))
+        check_bool("handle_timeout_termination", self.handle_timeout_termination)
         if self.lr_decay_every is not None:
             check_positive_int("lr_decay_every", self.lr_decay_every)
             if self.lr_decay_milestones is not None:
@@ -208,6 +210,14 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
 
     def _policy_kwargs_hint(self) -> str:
         """:return: what ``policy_kwargs`` takes, for the error of an unknown key"""
+        own_policies = tuple(self.policy_aliases.values())
+        if own_policies and not issubclass(self.policy_class, own_policies):
+            # A file saved by another algorithm (load() takes the saved policy class): its policy is not ours
+            return (
+                f"The policy class is {self.policy_class.__module__}.{self.policy_class.__qualname__}, not one of "
+                f"{type(self).__name__}'s: if this model was loaded from a file, the file was saved by another "
+                "algorithm; load it with that algorithm's class (e.g. REINFORCE.load or NStepSARSA.load)"
+            )
         parameters = [name for name in inspect.signature(self.policy_class).parameters if name not in _POLICY_ARGUMENTS]
         return (
             f"{type(self).__name__}'s policy takes {', '.join(parameters)} "
@@ -229,8 +239,11 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         learning rate).
 
         :param num_timesteps: env steps taken so far
-        :param total_timesteps: env steps of this ``learn()`` call
+        :param total_timesteps: env steps of this ``learn()`` call (``learn(0)``: 0, nothing to do, all of it remaining)
         """
+        if total_timesteps <= 0:
+            self._current_progress_remaining = 1.0
+            return
         self._current_progress_remaining = min(1.0, max(0.0, 1.0 - float(num_timesteps) / float(total_timesteps)))
 
     def _lr_decay_count(self) -> int:

@@ -4,7 +4,8 @@ optimizer's implementation.
 """
 
 import math
-from collections.abc import Iterable
+import numbers
+from collections.abc import Iterable, Sequence
 from functools import partial
 from typing import Any, Literal
 
@@ -27,6 +28,37 @@ _KAIMING_NONLINEARITY: dict[type[nn.Module], Nonlinearity] = {
 }
 
 
+def check_net_arch(net_arch: Any, keys: Sequence[str] = ()) -> None:
+    """
+    :param net_arch: hidden layer sizes, a list of positive integers (or None for the policy's default)
+    :param keys: the keys a dict of such lists may have (ActorCriticPolicy's ``pi``, ``vf``); none: only a list
+    :raises ValueError: for anything else, e.g. ``64`` for ``[64]``, a size of 0 or less, or a dict key the policy
+        would ignore (SAC/TD3's ``qf``)
+    """
+    if net_arch is None:
+        return
+    example = "e.g. [64, 64] (one hidden layer: [64]; none: [])"
+    if isinstance(net_arch, dict) and keys:
+        unknown = sorted(set(net_arch) - set(keys), key=str)
+        if unknown:
+            raise ValueError(
+                f"net_arch={net_arch!r}: unknown key(s) {', '.join(map(repr, unknown))}; this policy takes a list of "
+                f"hidden layer sizes for its networks, {example}, or a dict with the keys {', '.join(map(repr, keys))}"
+            )
+        for key, sizes in net_arch.items():
+            _check_layer_sizes(f"net_arch[{key!r}]", sizes, example)
+        return
+    _check_layer_sizes("net_arch", net_arch, example)
+
+
+def _check_layer_sizes(name: str, sizes: Any, example: str) -> None:
+    if isinstance(sizes, (str, bytes, dict)) or not isinstance(sizes, Sequence):
+        raise ValueError(f"{name}={sizes!r} must be a list of hidden layer sizes, {example}")
+    for size in sizes:
+        if isinstance(size, bool) or not isinstance(size, numbers.Integral) or size < 1:
+            raise ValueError(f"{name}={sizes!r}: each hidden layer size must be an integer >= 1, {example}")
+
+
 def make_activation(activation_fn: type[nn.Module], activation_kwargs: dict[str, Any] | None) -> type[nn.Module]:
     """
     SB3 builds activations by calling ``activation_fn()``; bind ``activation_kwargs`` so that e.g.
@@ -36,7 +68,13 @@ def make_activation(activation_fn: type[nn.Module], activation_kwargs: dict[str,
     :param activation_fn: activation class
     :param activation_kwargs: its constructor arguments
     :return: a callable building the activation
+    :raises TypeError: if ``activation_fn`` is not an ``nn.Module`` class (a string, or an instance such as ``nn.ReLU()``)
     """
+    if not (isinstance(activation_fn, type) and issubclass(activation_fn, nn.Module)):
+        raise TypeError(
+            f"activation_fn={activation_fn!r} must be an activation class such as nn.ReLU (the class, not a string or "
+            'an instance nn.ReLU()); in a zoo YAML: policy_kwargs: "dict(activation_fn=nn.ReLU)"'
+        )
     if not activation_kwargs:
         return activation_fn
     return partial(activation_fn, **activation_kwargs)  # type: ignore[return-value]

@@ -4,6 +4,7 @@ import numbers
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
 from stable_baselines3.common.type_aliases import Schedule
 from stable_baselines3.common.utils import FloatSchedule
 
@@ -58,3 +59,13 @@ def check_choice(name: str, value: Any, choices: Sequence[str], hint: str = "") 
     """
     if value not in choices:
         raise ValueError(f"{name}={value!r} must be one of {', '.join(map(repr, choices))}{'. ' + hint if hint else ''}")
+
+
+def check_bool(name: str, value: Any) -> None:
+    """
+    :param name: the argument's name
+    :param value: the value to check: True or False (NumPy's included), not a string or a number, whose truth
+        would be taken silently (``expected_sarsa="False"``, a quoted YAML value, is true)
+    """
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name}={value!r} must be True or False (in a zoo YAML: true or false, unquoted)")

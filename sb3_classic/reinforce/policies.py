@@ -12,6 +12,7 @@ from torch import nn
 
 from sb3_classic.common.policies import EnvActionsMixin
 from sb3_classic.common.torch_layers import (
+    check_net_arch,
     check_weight_init,
     constant_init,
     kaiming_init,
@@ -19,6 +20,7 @@ from sb3_classic.common.torch_layers import (
     optimizer_kwargs_with_defaults,
     remove_biases,
 )
+from sb3_classic.common.utils import check_bool
 
 
 class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
@@ -76,6 +78,9 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         optimizer_kwargs: dict[str, Any] | None = None,
     ):
         check_weight_init(weight_init)
+        check_net_arch(net_arch, keys=("pi", "vf"))
+        check_bool("with_bias", with_bias)
+        check_bool("use_baseline", use_baseline)
         super().__init__(
             observation_space,
             action_space,

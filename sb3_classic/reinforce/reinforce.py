@@ -11,7 +11,7 @@ from stable_baselines3.common.utils import FloatSchedule, explained_variance, ob
 from sb3_classic.common.buffers import TrainingBatch, select
 from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
 from sb3_classic.common.returns import discounted_returns
-from sb3_classic.common.utils import check_choice, check_learning_rate, check_positive_int, check_range
+from sb3_classic.common.utils import check_bool, check_choice, check_learning_rate, check_positive_int, check_range
 from sb3_classic.reinforce.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, REINFORCEPolicy
 
 SelfREINFORCE = TypeVar("SelfREINFORCE", bound="REINFORCE")
@@ -76,7 +76,8 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
     :param lr_decay_factor: multiply both learning rates by this at each decay (1.0: no decay)
     :param lr_decay_every: decay every this many ``lr_decay_unit`` (like PyTorch's ``StepLR``)
     :param lr_decay_milestones: decay when the count of ``lr_decay_unit`` reaches each of these (like ``MultiStepLR``)
-    :param lr_decay_unit: ``"episode"`` (completed episodes) or ``"update"`` (gradient updates)
+    :param lr_decay_unit: ``"episode"`` (completed episodes) or ``"update"`` (gradient steps, as ``train/n_updates``
+        counts them)
     :param handle_timeout_termination: at a time-limit truncation, bootstrap the return from v̂ of the final state
         (the time limit is not part of the task: SB3's choice, and the default); if False, the return ends there
         as at a termination
@@ -166,6 +167,8 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         super()._check_arguments()
         check_learning_rate("value_learning_rate", self.value_learning_rate)
         check_positive_int("n_episodes", self.n_episodes, hint="1 is the book's algorithm")
+        for name in ("use_baseline", "gamma_t_factor", "normalize_advantage"):
+            check_bool(name, getattr(self, name))
         check_choice("update_mode", self.update_mode, ("batch", "per_step"))
         if self.normalize_advantage and self.update_mode == "per_step":
             raise ValueError(

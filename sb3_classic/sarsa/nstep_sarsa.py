@@ -21,7 +21,7 @@ from sb3_classic.common.returns import (
     truncated_lambda_returns,
 )
 from sb3_classic.common.schedules import ExponentialDecay
-from sb3_classic.common.utils import check_choice, check_positive_int, check_range
+from sb3_classic.common.utils import check_bool, check_choice, check_positive_int, check_range
 from sb3_classic.sarsa.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, SARSAPolicy
 
 SelfNStepSARSA = TypeVar("SelfNStepSARSA", bound="NStepSARSA")
@@ -127,7 +127,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     :param lr_decay_every: decay every this many ``lr_decay_unit`` (like PyTorch's ``StepLR``)
     :param lr_decay_milestones: decay when the count of ``lr_decay_unit`` reaches each of these (like ``MultiStepLR``;
         the seed report's Acrobot setting decays at 300 and 500 episodes)
-    :param lr_decay_unit: ``"episode"`` (completed episodes) or ``"update"`` (gradient updates)
+    :param lr_decay_unit: ``"episode"`` (completed episodes) or ``"update"`` (gradient steps, as ``train/n_updates``
+        counts them)
     :param handle_timeout_termination: at a time-limit truncation, bootstrap from the final state (the time limit is
         not part of the task: SB3's choice, and the default); if False, the return ends there as at a termination
     :param stats_window_size: window size for the rollout logging, in episodes
@@ -265,6 +266,14 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         if self.target_update_interval is not None:
             check_positive_int("target_update_interval", self.target_update_interval, hint="or None for no target network")
         check_range("tau", self.tau, 0.0, 1.0, low_open=True, hint="1.0 copies q̂ at every target update")
+        if self.target_update_interval is None and self.tau != 1.0:
+            raise ValueError(
+                f"tau={self.tau!r} is the soft update coefficient of the bootstrap network, but target_update_interval is "
+                "None, so there is none (the targets bootstrap from q̂ itself, as the book's do) and tau would be ignored. "
+                "Pass target_update_interval as well (env steps between two moves of the copy towards q̂, e.g. 1: after "
+                "every update; SB3's DQN uses 10000), or drop tau"
+            )
+        check_bool("expected_sarsa", self.expected_sarsa)
         if self.averaging_tau is not None:
             check_range(
                 "averaging_tau",

@@ -20,12 +20,14 @@ from torch import nn
 
 from sb3_classic.common.policies import MODE_DEPENDENT_MODULES, EnvActionsMixin
 from sb3_classic.common.torch_layers import (
+    check_net_arch,
     check_weight_init,
     constant_init,
     kaiming_init,
     make_activation,
     optimizer_kwargs_with_defaults,
 )
+from sb3_classic.common.utils import check_bool
 
 
 class SARSAPolicy(EnvActionsMixin, BasePolicy):
@@ -100,6 +102,9 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
                 f"net_arch={net_arch!r}: the Q-network of NStepSARSA takes a list of hidden layer sizes, e.g. [64, 64] "
                 "(dict(pi=..., vf=...) / dict(pi=..., qf=...) are for actor-critic methods)"
             )
+        check_net_arch(net_arch)
+        check_bool("with_bias", with_bias)
+        check_bool("layer_norm", layer_norm)
         if net_arch is None:
             net_arch = [] if features_extractor_class == NatureCNN else [64, 64]
         self.net_arch = net_arch
