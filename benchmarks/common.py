@@ -3,7 +3,12 @@ The repository's paths and the benchmark's envs; the rest of what a run is lives
 and is re-exported here, so that ``from benchmarks.common import RunSpec`` keeps working.
 """
 
+import contextlib
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
+
+import yaml
 
 from sb3_classic.harness.common import (
     ALL_ALGOS,
@@ -36,6 +41,7 @@ __all__ = [
     "code_versions",
     "hyperparams_path",
     "load_hyperparams",
+    "parse_overrides",
     "register_algorithms",
 ]
 
@@ -49,3 +55,27 @@ DEFAULT_CACHE_DIR = REPO_ROOT / "benchmarks" / "cache"
 DEFAULT_RESULTS_DIR = REPO_ROOT / "benchmarks" / "results"
 #: Where ``--quick`` writes its tables and plots: scratch, git-ignored with the cache
 QUICK_RESULTS_DIR = DEFAULT_CACHE_DIR / "quick-results"
+
+
+def parse_overrides(values: Sequence[str], algos: Sequence[str]) -> dict[str, dict[str, Any]]:
+    """
+    :param values: ``ALGO.KEY=VALUE``, each value read as YAML (``10.0`` and ``5e-4`` floats, ``lin_1e-3`` a string)
+    :param algos: the algorithms benchmarked
+    :return: per algorithm, the keys to replace in (or add to) its YAML entries
+    :raises ValueError: naming the ``--set`` value that is malformed or names an algorithm not benchmarked
+    """
+    overrides: dict[str, dict[str, Any]] = {}
+    for value in values:
+        target, equals, text = value.partition("=")
+        algo, dot, key = target.partition(".")
+        if not (equals and dot and algo and key):
+            raise ValueError(f"--set {value!r}: write ALGO.KEY=VALUE, e.g. nstep_sarsa.max_grad_norm=10.0")
+        if algo not in algos:
+            raise ValueError(f"--set {value!r}: {algo!r} is not one of the algorithms benchmarked ({', '.join(algos)})")
+        parsed = yaml.safe_load(text)
+        if isinstance(parsed, str):
+            # YAML 1.1 reads 5e-4 (no dot) as a string, which the zoo would then take for a schedule name
+            with contextlib.suppress(ValueError):
+                parsed = float(text)
+        overrides.setdefault(algo, {})[key] = parsed
+    return overrides

@@ -13,7 +13,6 @@ process pool or the Dask cluster, the progress display); this module is the benc
 """
 
 import argparse
-import contextlib
 import os
 import platform
 import shlex
@@ -27,7 +26,7 @@ from typing import Any
 import yaml
 from rich.console import Console
 
-from benchmarks.common import DEFAULT_CACHE_DIR, DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR
+from benchmarks.common import DEFAULT_CACHE_DIR, DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR, parse_overrides
 from benchmarks.report import load_results, markdown_table, summary_table, threshold_crossings, write_learning_report
 from benchmarks.throughput import ThroughputSettings, run_throughput, throughput_header, write_throughput_report
 from sb3_classic.harness.common import ALL_ALGOS, LABELS, OUR_ALGOS, RunSpec, code_versions, hyperparams_path
@@ -88,30 +87,6 @@ def parse_budgets(values: Sequence[str], env_ids: Sequence[str], defaults: dict[
         for target in [env_id] if env_id else env_ids:
             budgets[target] = int(float(steps))
     return budgets
-
-
-def parse_overrides(values: Sequence[str], algos: Sequence[str]) -> dict[str, dict[str, Any]]:
-    """
-    :param values: ``ALGO.KEY=VALUE``, each value read as YAML (``10.0`` and ``5e-4`` floats, ``lin_1e-3`` a string)
-    :param algos: the algorithms benchmarked
-    :return: per algorithm, the keys to replace in (or add to) its YAML entries
-    :raises ValueError: naming the ``--set`` value that is malformed or names an algorithm not benchmarked
-    """
-    overrides: dict[str, dict[str, Any]] = {}
-    for value in values:
-        target, equals, text = value.partition("=")
-        algo, dot, key = target.partition(".")
-        if not (equals and dot and algo and key):
-            raise ValueError(f"--set {value!r}: write ALGO.KEY=VALUE, e.g. nstep_sarsa.max_grad_norm=10.0")
-        if algo not in algos:
-            raise ValueError(f"--set {value!r}: {algo!r} is not one of the algorithms benchmarked ({', '.join(algos)})")
-        parsed = yaml.safe_load(text)
-        if isinstance(parsed, str):
-            # YAML 1.1 reads 5e-4 (no dot) as a string, which the zoo would then take for a schedule name
-            with contextlib.suppress(ValueError):
-                parsed = float(text)
-        overrides.setdefault(algo, {})[key] = parsed
-    return overrides
 
 
 def make_specs(

@@ -14,7 +14,7 @@ import tempfile
 import time
 from collections.abc import Callable, Sequence
 from contextlib import redirect_stderr, redirect_stdout
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from io import StringIO
 from pathlib import Path
 from typing import Any, TypeVar
@@ -27,7 +27,7 @@ from rl_zoo3.exp_manager import ExperimentManager
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 
-from benchmarks.common import DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR
+from benchmarks.common import DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR, parse_overrides
 from benchmarks.report import markdown_table
 from sb3_classic.harness.common import LABELS, code_versions, hyperparams_path, load_hyperparams, register_algorithms
 
@@ -47,31 +47,38 @@ class ThroughputSettings:
     :param n_envs: the numbers of envs to measure with
     :param steps: env steps of each timed ``learn()``
     :param repeats: timed ``learn()`` calls per algorithm, env and number of envs
+    :param overrides: per algorithm, keys replacing those of its YAML entries (``--set``; ``parse_overrides``)
     """
 
     env_ids: tuple[str, ...] = ENV_IDS
     n_envs: tuple[int, ...] = (1, 8)
     steps: int = 20_000
     repeats: int = 5
+    overrides: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
-def throughput_hyperparams(algo: str, env_id: str, n_envs: int) -> dict[str, Any]:
+def throughput_hyperparams(
+    algo: str, env_id: str, n_envs: int, overrides: dict[str, dict[str, Any]] | None = None
+) -> dict[str, Any]:
     """
     The overrides of the zoo YAML entry for the throughput runs: ``n_envs``, no ``VecNormalize``, and
-    ``net_arch=[64, 64]`` with the entry's other ``policy_kwargs``.
+    ``net_arch=[64, 64]`` with the entry's other ``policy_kwargs``; and the algorithm's changes of ``--set``.
 
     :param algo: the algorithm
     :param env_id: the env
     :param n_envs: the number of envs
+    :param overrides: per algorithm, keys replacing those of its YAML entry (the throughput's own three win)
     :return: the overrides (``policy_kwargs`` as a string, for the zoo to evaluate as it does the YAML's)
     """
     yaml_kwargs = load_hyperparams(algo, env_id).get("policy_kwargs")
     # A dict display overriding the YAML's net_arch (a string too: the zoo evaluates it as it does the YAML's)
     policy_kwargs = f"{{**{yaml_kwargs or 'dict()'}, 'net_arch': {NET_ARCH}}}"
-    return {"n_envs": n_envs, "normalize": False, "policy_kwargs": policy_kwargs}
+    return {**(overrides or {}).get(algo, {}), "n_envs": n_envs, "normalize": False, "policy_kwargs": policy_kwargs}
 
 
-def build_model(algo: str, env_id: str, n_envs: int, seed: int, log_folder: Path) -> BaseAlgorithm:
+def build_model(
+    algo: str, env_id: str, n_envs: int, seed: int, log_folder: Path, overrides: dict[str, dict[str, Any]] | None = None
+) -> BaseAlgorithm:
     """
     :return: ``algo`` on ``n_envs`` copies of ``env_id``, built by rl-zoo3 from its YAML and ``throughput_hyperparams``
     """
@@ -80,7 +87,7 @@ def build_model(algo: str, env_id: str, n_envs: int, seed: int, log_folder: Path
         algo,
         env_id,
         str(log_folder),
-        hyperparams=throughput_hyperparams(algo, env_id, n_envs),
+        hyperparams=throughput_hyperparams(algo, env_id, n_envs, overrides),
         eval_freq=0,
         seed=seed,
         log_interval=-1,
@@ -108,15 +115,24 @@ def timed(function: Callable[..., T], timers: dict[str, float], key: str) -> Cal
     return wrapper
 
 
-def measure(algo: str, env_id: str, n_envs: int, steps: int, seed: int, log_folder: Path) -> dict[str, Any]:
+def measure(
+    algo: str,
+    env_id: str,
+    n_envs: int,
+    steps: int,
+    seed: int,
+    log_folder: Path,
+    overrides: dict[str, dict[str, Any]] | None = None,
+) -> dict[str, Any]:
     """
     Time ``learn(steps)`` of a new model (its construction is not timed), and the parts of it spent in the envs'
     ``step`` and in ``train()``.
 
+    :param overrides: per algorithm, keys replacing those of its YAML entry (``ThroughputSettings.overrides``)
     :return: the measurement: ``algo``, ``env_id``, ``n_envs``, ``seed``, ``steps`` (taken), ``seconds``, ``env_s``,
         ``train_s``, ``steps_per_s``
     """
-    model = build_model(algo, env_id, n_envs, seed, log_folder)
+    model = build_model(algo, env_id, n_envs, seed, log_folder, overrides)
     env = model.env
     assert env is not None
     assert isinstance(model, OnPolicyAlgorithm)
@@ -161,13 +177,14 @@ def run_throughput(settings: ThroughputSettings, console: Console | None = None)
                 for algo in THROUGHPUT_ALGOS:
                     # Warm-up, not recorded: first calls, lazy imports, allocator
                     progress.update(task, description=f"warm-up {LABELS[algo]} {env_id} n_envs={n_envs}")
-                    measure(algo, env_id, n_envs, min(settings.steps, 1000), 0, Path(folder))
+                    measure(algo, env_id, n_envs, min(settings.steps, 1000), 0, Path(folder), settings.overrides)
                     progress.advance(task)
                 for repeat in range(settings.repeats):
                     shift = repeat % n_algos
                     for algo in THROUGHPUT_ALGOS[shift:] + THROUGHPUT_ALGOS[:shift]:
                         progress.update(task, description=f"{LABELS[algo]} {env_id} n_envs={n_envs} repeat {repeat + 1}")
-                        rows.append({**measure(algo, env_id, n_envs, settings.steps, repeat, Path(folder)), "repeat": repeat})
+                        measured = measure(algo, env_id, n_envs, settings.steps, repeat, Path(folder), settings.overrides)
+                        rows.append({**measured, "repeat": repeat})
                         progress.advance(task)
     return pd.DataFrame(rows)
 
@@ -246,6 +263,9 @@ def time_breakdown_table(measurements: pd.DataFrame) -> pd.DataFrame:
 def throughput_header(command: str, settings: ThroughputSettings) -> str:
     """:return: the markdown above the throughput table: the command and the settings"""
     versions = ", ".join(f"{name} {version}" for name, version in code_versions("reinforce").items())
+    changes = ", ".join(
+        f"`{algo}.{key}={value!r}`" for algo, keys in settings.overrides.items() for key, value in keys.items()
+    )
     return (
         "# Throughput of `learn()`\n\n"
         f"Produced by:\n\n```\n{command}\n```\n\n"
@@ -255,6 +275,7 @@ def throughput_header(command: str, settings: ThroughputSettings) -> str:
         "(A2C: rl-zoo3's, which is SB3's defaults here), without VecNormalize; torch 1 thread, device cpu. "
         f"Ratios are ours divided by A2C's within the same repeat: median (min–max) over repeats. "
         f"Target of issue 13: ≥ {TARGET_RATIO:g}× at n_envs 1 and 8 (issue 5's was ≥ 1.5×).\n\nVersions: {versions}."
+        + (f"\n\nChanged from the YAML entries (`--set`): {changes}." if changes else "")
     )
 
 
@@ -291,13 +312,28 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--steps", type=int, help="env steps of each timed learn() (default 20,000)")
     parser.add_argument("--repeats", type=int, help="timed learn() calls per algorithm and setting (default 5)")
     parser.add_argument("--results-dir", type=Path, help=f"where to write (default {DEFAULT_RESULTS_DIR})")
+    parser.add_argument(
+        "--set",
+        nargs="+",
+        default=[],
+        metavar="ALGO.KEY=VALUE",
+        help="time a change to the YAML entries of an algorithm (e.g. nstep_sarsa.gradient_steps=4); needs "
+        "--results-dir, so that the committed results stay those of the YAML",
+    )
     args = parser.parse_args(argv)
+    if args.set and args.results_dir is None:
+        parser.error("--set needs --results-dir: the default results are those of the YAML entries as they are")
+    try:
+        overrides = parse_overrides(args.set, THROUGHPUT_ALGOS)
+    except ValueError as error:
+        parser.error(str(error))
     quick = ThroughputSettings(steps=2_000, repeats=3) if args.quick else ThroughputSettings()
     settings = ThroughputSettings(
         env_ids=tuple(args.envs),
         n_envs=tuple(args.n_envs),
         steps=args.steps or quick.steps,
         repeats=args.repeats or quick.repeats,
+        overrides=overrides,
     )
     results_dir = args.results_dir or (QUICK_RESULTS_DIR if args.quick else DEFAULT_RESULTS_DIR)
     console = Console()

@@ -31,7 +31,14 @@ from benchmarks.report import (
     threshold_crossings,
 )
 from benchmarks.run import FULL, QUICK, main, make_specs, parse_budgets, parse_overrides
-from benchmarks.throughput import measure, throughput_ratios, throughput_table, time_breakdown_table
+from benchmarks.throughput import (
+    build_model,
+    measure,
+    throughput_ratios,
+    throughput_table,
+    time_breakdown_table,
+)
+from benchmarks.throughput import main as throughput_main
 from sb3_classic import NStepSARSA
 from sb3_classic.harness import pool, runner
 from sb3_classic.harness.common import RunSpec, code_versions, register_algorithms
@@ -287,6 +294,23 @@ def test_measure_times_the_envs_and_train_inside_learn(algo: str, tmp_path: Path
     assert 0 < result["env_s"] < result["seconds"]
     assert 0 < result["train_s"] < result["seconds"]
     assert result["env_s"] + result["train_s"] < result["seconds"]
+
+
+def test_throughput_set_changes_one_algorithms_entry_but_not_the_throughputs_own_keys(tmp_path: Path) -> None:
+    register_algorithms()
+    overrides = {"nstep_sarsa": {"gradient_steps": 4, "n_envs": 3}}
+    sarsa = build_model("nstep_sarsa", "CartPole-v1", 2, 0, tmp_path, overrides)
+    assert sarsa.gradient_steps == 4  # type: ignore[attr-defined]
+    assert sarsa.n_envs == 2  # the measured number of envs wins
+    assert sarsa.policy.q_net.q_net[0].out_features == 64  # type: ignore[union-attr,index]
+    assert build_model("nstep_sarsa", "CartPole-v1", 2, 0, tmp_path).gradient_steps == 8  # type: ignore[attr-defined]
+    assert build_model("a2c", "CartPole-v1", 2, 0, tmp_path, overrides).n_envs == 2
+
+
+def test_throughput_set_needs_a_results_dir(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        throughput_main(["--set", "nstep_sarsa.gradient_steps=4"])
+    assert "--set needs --results-dir" in capsys.readouterr().err
 
 
 def test_hot_paths_variants_are_what_they_say() -> None:
