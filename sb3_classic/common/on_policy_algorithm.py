@@ -175,6 +175,11 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
                     f"lr_decay_milestones={self.lr_decay_milestones!r} must be a list of counts, e.g. [300, 500] (one "
                     "milestone: [300]); for a decay every k, pass lr_decay_every=k"
                 )
+            if len(self.lr_decay_milestones) == 0:
+                raise ValueError(
+                    "lr_decay_milestones=[] has no milestone: pass the counts to decay at, e.g. [300, 500], or None for "
+                    "no decay"
+                )
             for milestone in self.lr_decay_milestones:
                 check_positive_int("lr_decay_milestones[...]", milestone)
         if self.lr_decay_factor != 1.0 and self.lr_decay_every is None and self.lr_decay_milestones is None:
