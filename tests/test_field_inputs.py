@@ -577,6 +577,7 @@ REFUSED_INPUTS = [
     (REINFORCE, dict(handle_timeout_termination="yes"), TypeError, "handle_timeout_termination='yes'"),
     (NStepSARSA, dict(policy_kwargs=dict(with_bias="False")), TypeError, "with_bias='False'"),
     (REINFORCE, dict(lr_decay_factor=0.5, lr_decay_milestones=[]), ValueError, "lr_decay_milestones=[] has no milestone"),
+    (NStepSARSA, dict(gradient_steps=-1), ValueError, "DQN's -1"),
 ]
 
 

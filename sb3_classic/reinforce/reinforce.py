@@ -167,7 +167,8 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         super()._check_arguments()
         check_learning_rate("value_learning_rate", self.value_learning_rate)
         check_positive_int("n_episodes", self.n_episodes, hint="1 is the book's algorithm")
-        for name in ("use_baseline", "gamma_t_factor", "normalize_advantage"):
+        # (use_baseline: checked by the policy, which takes it)
+        for name in ("gamma_t_factor", "normalize_advantage"):
             check_bool(name, getattr(self, name))
         check_choice("update_mode", self.update_mode, ("batch", "per_step"))
         if self.normalize_advantage and self.update_mode == "per_step":

@@ -246,7 +246,11 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             self.train_freq,
             hint="It counts env steps per env; SB3's tuple form (4, 'step') is not supported, and there is no 'episode' unit",
         )
-        check_positive_int("gradient_steps", self.gradient_steps)
+        check_positive_int(
+            "gradient_steps",
+            self.gradient_steps,
+            hint="A count per update; SB3's DQN's -1 (as many as the env steps of the rollout) would be train_freq here",
+        )
         check_choice("update_mode", self.update_mode, ("batch", "per_step"))
         check_choice("exploration_schedule", self.exploration_schedule, ("exponential", "linear"))
         check_range("exploration_initial_eps", self.exploration_initial_eps, 0.0, 1.0)
