@@ -38,7 +38,12 @@ def check_net_arch(net_arch: Any, keys: Sequence[str] = ()) -> None:
     if net_arch is None:
         return
     example = "e.g. [64, 64] (one hidden layer: [64]; none: [])"
-    if isinstance(net_arch, dict) and keys:
+    if isinstance(net_arch, dict) and not keys:
+        raise ValueError(
+            f"net_arch={net_arch!r}: this network takes a list of hidden layer sizes, {example}; dict(pi=..., vf=...) "
+            "and dict(pi=..., qf=...) are for actor-critic methods"
+        )
+    if isinstance(net_arch, dict):
         unknown = sorted(set(net_arch) - set(keys), key=str)
         if unknown:
             raise ValueError(

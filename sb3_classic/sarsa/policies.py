@@ -97,11 +97,6 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             optimizer_kwargs=optimizer_kwargs,
             normalize_images=normalize_images,
         )
-        if isinstance(net_arch, dict):
-            raise ValueError(
-                f"net_arch={net_arch!r}: the Q-network of NStepSARSA takes a list of hidden layer sizes, e.g. [64, 64] "
-                "(dict(pi=..., vf=...) / dict(pi=..., qf=...) are for actor-critic methods)"
-            )
         check_net_arch(net_arch)
         check_bool("with_bias", with_bias)
         check_bool("layer_norm", layer_norm)
