@@ -3,6 +3,7 @@ The repository's paths and the benchmark's envs; the rest of what a run is lives
 and is re-exported here, so that ``from benchmarks.common import RunSpec`` keeps working.
 """
 
+import argparse
 import contextlib
 from collections.abc import Sequence
 from pathlib import Path
@@ -41,6 +42,7 @@ __all__ = [
     "code_versions",
     "hyperparams_path",
     "load_hyperparams",
+    "overrides_from_args",
     "parse_overrides",
     "register_algorithms",
 ]
@@ -79,3 +81,24 @@ def parse_overrides(values: Sequence[str], algos: Sequence[str]) -> dict[str, di
                 parsed = float(text)
         overrides.setdefault(algo, {})[key] = parsed
     return overrides
+
+
+def overrides_from_args(
+    parser: argparse.ArgumentParser, values: Sequence[str], results_dir: Path | None, algos: Sequence[str]
+) -> dict[str, dict[str, Any]]:
+    """
+    The ``--set`` of a benchmark command: ``parse_overrides``, with its errors and a missing ``--results-dir`` reported
+    as the parser's (the committed results stay those of the YAML entries as they are).
+
+    :param parser: the command's parser
+    :param values: its ``--set`` values
+    :param results_dir: its ``--results-dir``
+    :param algos: the algorithms it benchmarks
+    :return: per algorithm, the keys to replace in its YAML entries
+    """
+    if values and results_dir is None:
+        parser.error("--set needs --results-dir: the default results are those of the YAML entries as they are")
+    try:
+        return parse_overrides(values, algos)
+    except ValueError as error:
+        parser.error(str(error))

@@ -26,7 +26,7 @@ from typing import Any
 import yaml
 from rich.console import Console
 
-from benchmarks.common import DEFAULT_CACHE_DIR, DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR, parse_overrides
+from benchmarks.common import DEFAULT_CACHE_DIR, DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR, overrides_from_args
 from benchmarks.report import load_results, markdown_table, summary_table, threshold_crossings, write_learning_report
 from benchmarks.throughput import ThroughputSettings, run_throughput, throughput_header, write_throughput_report
 from sb3_classic.harness.common import ALL_ALGOS, LABELS, OUR_ALGOS, RunSpec, code_versions, hyperparams_path
@@ -218,12 +218,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--throughput-repeats", type=int, help="timed learn() calls per algorithm and setting (default 5)")
     args = parser.parse_args(argv)
 
-    if args.set and args.results_dir is None:
-        parser.error("--set needs --results-dir: the default results are those of the YAML entries as they are")
-    try:
-        overrides = parse_overrides(args.set, args.algos)
-    except ValueError as error:
-        parser.error(str(error))
+    overrides = overrides_from_args(parser, args.set, args.results_dir, args.algos)
     base = QUICK if args.quick else FULL
     settings = Settings(
         seeds=base.seeds if args.seeds is None else args.seeds,

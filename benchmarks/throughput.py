@@ -27,7 +27,7 @@ from rl_zoo3.exp_manager import ExperimentManager
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 
-from benchmarks.common import DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR, parse_overrides
+from benchmarks.common import DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR, overrides_from_args
 from benchmarks.report import markdown_table
 from sb3_classic.harness.common import LABELS, code_versions, hyperparams_path, load_hyperparams, register_algorithms
 
@@ -321,12 +321,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         "--results-dir, so that the committed results stay those of the YAML",
     )
     args = parser.parse_args(argv)
-    if args.set and args.results_dir is None:
-        parser.error("--set needs --results-dir: the default results are those of the YAML entries as they are")
-    try:
-        overrides = parse_overrides(args.set, THROUGHPUT_ALGOS)
-    except ValueError as error:
-        parser.error(str(error))
+    overrides = overrides_from_args(parser, args.set, args.results_dir, THROUGHPUT_ALGOS)
     quick = ThroughputSettings(steps=2_000, repeats=3) if args.quick else ThroughputSettings()
     settings = ThroughputSettings(
         env_ids=tuple(args.envs),

@@ -18,7 +18,7 @@ import pytest
 from rich.console import Console
 
 from benchmarks import hot_paths
-from benchmarks.common import REPO_ROOT
+from benchmarks.common import REPO_ROOT, parse_overrides
 from benchmarks.diagnostics.common import Variant, collect
 from benchmarks.report import (
     Results,
@@ -30,7 +30,7 @@ from benchmarks.report import (
     summary_table,
     threshold_crossings,
 )
-from benchmarks.run import FULL, QUICK, main, make_specs, parse_budgets, parse_overrides
+from benchmarks.run import FULL, QUICK, main, make_specs, parse_budgets
 from benchmarks.throughput import (
     build_model,
     measure,
