@@ -543,6 +543,51 @@ def test_integer_observations_are_not_checked() -> None:
     assert not all_finite({"image": np.zeros((2, 4), dtype=np.uint8), "vector": np.array([[0.0, np.nan]])})
 
 
+class DiscreteWalk(gym.Env[Any, np.int64]):
+    """
+    A walk on 5 states whose observations are what Gymnasium's tabular envs (FrozenLake, CliffWalking) return: the
+    state as a plain Python int, or inside a Dict beside a Box; 3-step episodes end by a time limit (a truncation).
+
+    :param as_dict: observe ``{"state": int, "noise": Box}`` instead of the int
+    """
+
+    def __init__(self, as_dict: bool = False) -> None:
+        self.as_dict = as_dict
+        state_space = spaces.Discrete(5)
+        self.observation_space: spaces.Space[Any] = (
+            spaces.Dict({"state": state_space, "noise": spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)})
+            if as_dict
+            else state_space
+        )
+        self.action_space = spaces.Discrete(2)
+        self._state = 2
+
+    def _obs(self) -> Any:
+        return {"state": self._state, "noise": np.zeros(2, dtype=np.float32)} if self.as_dict else self._state
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        super().reset(seed=seed)
+        self._state = 2
+        return self._obs(), {}
+
+    def step(self, action: np.int64) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        self._state = min(4, max(0, self._state + (1 if int(action) == 1 else -1)))
+        return self._obs(), float(self._state == 4), False, False, {}
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+@pytest.mark.parametrize("as_dict", [False, True])
+def test_discrete_observations_returned_as_python_ints(model_class: type[BaseAlgorithm], as_dict: bool) -> None:
+    # The VecEnv passes a truncated episode's last observation through as the env returned it (a Python int here),
+    # and the check for NaN in it failed on the int ('int' object has no attribute 'dtype'), as A2C and DQN do not
+    env = make_vec_env(lambda: gym.wrappers.TimeLimit(DiscreteWalk(as_dict), max_episode_steps=3), n_envs=2)
+    policy = "MultiInputPolicy" if as_dict else "MlpPolicy"
+    model = model_class(policy, env, seed=0, device="cpu")
+    model.learn(60)
+    assert model.num_timesteps >= 60
+    assert all_finite(3) and all_finite({"state": 3, "noise": np.zeros(2)}) and not all_finite(math.nan)
+
+
 @pytest.mark.parametrize("model_class", MODEL_LIST)
 @pytest.mark.parametrize("reset_num_timesteps", [True, False])
 def test_learn_zero_steps_returns_the_model_unchanged(model_class: type[BaseAlgorithm], reset_num_timesteps: bool) -> None:

@@ -52,11 +52,13 @@ def select(observations: Observations, index: Any) -> Observations:
 
 def all_finite(observations: Observations) -> bool:
     """
-    :param observations: a batch of observations (an array, or a dict of arrays)
+    :param observations: a batch of observations (an array, or a dict of arrays), or one observation as the env
+        returned it (a VecEnv's ``terminal_observation``: a plain Python int for a ``Discrete`` space)
     :return: whether every entry is finite (integer arrays, e.g. images, always are)
     """
     if isinstance(observations, dict):
         return all(all_finite(obs) for obs in observations.values())
+    observations = np.asarray(observations)
     return observations.dtype.kind not in "fc" or bool(np.isfinite(observations).all())
 
 

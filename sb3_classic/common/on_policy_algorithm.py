@@ -325,7 +325,9 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
                 final_obs = infos[idx].get("terminal_observation")
                 if final_obs is not None and not all_finite(final_obs):
                     batch = (
-                        {key: obs[None] for key, obs in final_obs.items()} if isinstance(final_obs, dict) else final_obs[None]
+                        {key: np.asarray(obs)[None] for key, obs in final_obs.items()}
+                        if isinstance(final_obs, dict)
+                        else np.asarray(final_obs)[None]
                     )
                     self._raise_non_finite(
                         batch, "final observation (infos[i]['terminal_observation'])", env_indices=[int(idx)]
