@@ -5,6 +5,7 @@ and is re-exported here, so that ``from benchmarks.common import RunSpec`` keeps
 
 import argparse
 import contextlib
+import difflib
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -18,7 +19,9 @@ from sb3_classic.harness.common import (
     PEER_ALGOS,
     THRESHOLDS,
     ZOO_HYPERPARAMS_DIR,
+    ZOO_KEYS,
     RunSpec,
+    algorithm_arguments,
     code_versions,
     hyperparams_path,
     load_hyperparams,
@@ -64,7 +67,8 @@ def parse_overrides(values: Sequence[str], algos: Sequence[str]) -> dict[str, di
     :param values: ``ALGO.KEY=VALUE``, each value read as YAML (``10.0`` and ``5e-4`` floats, ``lin_1e-3`` a string)
     :param algos: the algorithms benchmarked
     :return: per algorithm, the keys to replace in (or add to) its YAML entries
-    :raises ValueError: naming the ``--set`` value that is malformed or names an algorithm not benchmarked
+    :raises ValueError: naming the ``--set`` value that is malformed, names an algorithm not benchmarked, or a key
+        that is neither an argument of the algorithm nor one the zoo reads (a typo would otherwise fail every run)
     """
     overrides: dict[str, dict[str, Any]] = {}
     for value in values:
@@ -74,6 +78,15 @@ def parse_overrides(values: Sequence[str], algos: Sequence[str]) -> dict[str, di
             raise ValueError(f"--set {value!r}: write ALGO.KEY=VALUE, e.g. nstep_sarsa.max_grad_norm=10.0")
         if algo not in algos:
             raise ValueError(f"--set {value!r}: {algo!r} is not one of the algorithms benchmarked ({', '.join(algos)})")
+        if key == "n_timesteps":
+            raise ValueError(f"--set {value!r}: the env steps per run are the command's --budget (or --steps)")
+        known = algorithm_arguments(algo) | ZOO_KEYS
+        if key not in known:
+            close = difflib.get_close_matches(key, sorted(known), n=1)
+            hint = (
+                f"did you mean {close[0]!r}?" if close else f"the arguments of {LABELS[algo]} and the zoo's {sorted(ZOO_KEYS)}"
+            )
+            raise ValueError(f"--set {value!r}: {algo} has no setting {key!r}: {hint}")
         parsed = yaml.safe_load(text)
         if isinstance(parsed, str):
             # YAML 1.1 reads 5e-4 (no dot) as a string, which the zoo would then take for a schedule name

@@ -34,6 +34,7 @@ import sb3_classic
 from benchmarks.textbook import Setting, make_model
 from benchmarks.textbook_numpy import mountain_car_sarsa
 from sb3_classic import NStepSARSA
+from sb3_classic.harness.common import positive_int
 
 RESULTS = Path(__file__).resolve().parent / "results" / "textbook" / "per_step_speed.md"
 MOUNTAIN_CAR_N, MOUNTAIN_CAR_ALPHA = 8, 0.3 / 8
@@ -131,8 +132,8 @@ COMPARISONS = (
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--steps", type=int, default=10_000, help="env steps per timed run (default 10,000)")
-    parser.add_argument("--repeats", type=int, default=3, help="timed runs of each (default 3)")
+    parser.add_argument("--steps", type=positive_int, default=10_000, help="env steps per timed run (default 10,000)")
+    parser.add_argument("--repeats", type=positive_int, default=3, help="timed runs of each (default 3)")
     parser.add_argument("--output", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
     th.set_num_threads(1)

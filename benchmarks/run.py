@@ -29,7 +29,16 @@ from rich.console import Console
 from benchmarks.common import DEFAULT_CACHE_DIR, DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR, overrides_from_args
 from benchmarks.report import load_results, markdown_table, summary_table, threshold_crossings, write_learning_report
 from benchmarks.throughput import ThroughputSettings, run_throughput, throughput_header, write_throughput_report
-from sb3_classic.harness.common import ALL_ALGOS, LABELS, OUR_ALGOS, RunSpec, code_versions, hyperparams_path
+from sb3_classic.harness.common import (
+    ALL_ALGOS,
+    LABELS,
+    OUR_ALGOS,
+    RunSpec,
+    code_versions,
+    hyperparams_path,
+    int_at_least,
+    positive_int,
+)
 from sb3_classic.harness.pool import report_missing, run_missing_runs
 from sb3_classic.harness.runner import RUN_FILE
 
@@ -186,8 +195,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--envs", nargs="+", choices=ENV_IDS, default=list(ENV_IDS), help="envs to benchmark")
     parser.add_argument("--algos", nargs="+", choices=ALL_ALGOS, default=list(ALL_ALGOS), help="algorithms to benchmark")
-    parser.add_argument("--seeds", type=int, help=f"seeds of REINFORCE and NStepSARSA (default {FULL.seeds})")
-    parser.add_argument("--peer-seeds", type=int, help=f"seeds of A2C, PPO and DQN (default {FULL.peer_seeds})")
+    parser.add_argument("--seeds", type=int_at_least(0), help=f"seeds of REINFORCE and NStepSARSA (default {FULL.seeds})")
+    parser.add_argument("--peer-seeds", type=int_at_least(0), help=f"seeds of A2C, PPO and DQN (default {FULL.peer_seeds})")
     parser.add_argument(
         "--budget",
         nargs="+",
@@ -195,9 +204,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         metavar="[ENV=]STEPS",
         help="env steps per run, for one env (CartPole-v1=3e5) or all (3e5); default 2e5 on both",
     )
-    parser.add_argument("--eval-freq", type=int, help=f"env steps between two evaluations (default {FULL.eval_freq})")
-    parser.add_argument("--eval-episodes", type=int, help=f"episodes per evaluation (default {FULL.eval_episodes})")
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="runs in parallel (default: the cores)")
+    parser.add_argument("--eval-freq", type=positive_int, help=f"env steps between two evaluations (default {FULL.eval_freq})")
+    parser.add_argument("--eval-episodes", type=positive_int, help=f"episodes per evaluation (default {FULL.eval_episodes})")
+    parser.add_argument(
+        "--workers", type=positive_int, default=os.cpu_count() or 1, help="runs in parallel (default: the cores)"
+    )
     parser.add_argument(
         "--scheduler",
         metavar="tcp://HOST:PORT",
@@ -214,22 +225,28 @@ def main(argv: Sequence[str] | None = None) -> int:
         "learning runs (not the throughput's); needs --results-dir, so that the committed results stay those of the YAML",
     )
     parser.add_argument("--skip-throughput", action="store_true", help="only the learning runs and their report")
-    parser.add_argument("--throughput-steps", type=int, help="env steps of each timed learn() (default 20,000)")
-    parser.add_argument("--throughput-repeats", type=int, help="timed learn() calls per algorithm and setting (default 5)")
+    parser.add_argument("--throughput-steps", type=positive_int, help="env steps of each timed learn() (default 20,000)")
+    parser.add_argument(
+        "--throughput-repeats", type=positive_int, help="timed learn() calls per algorithm and setting (default 5)"
+    )
     args = parser.parse_args(argv)
 
     overrides = overrides_from_args(parser, args.set, args.results_dir, args.algos)
     base = QUICK if args.quick else FULL
+    try:
+        budgets = parse_budgets(args.budget, args.envs, base.budgets)
+    except ValueError as error:
+        parser.error(str(error))
     settings = Settings(
         seeds=base.seeds if args.seeds is None else args.seeds,
         peer_seeds=base.peer_seeds if args.peer_seeds is None else args.peer_seeds,
-        budgets=parse_budgets(args.budget, args.envs, base.budgets),
-        eval_freq=args.eval_freq or base.eval_freq,
-        eval_episodes=args.eval_episodes or base.eval_episodes,
+        budgets=budgets,
+        eval_freq=base.eval_freq if args.eval_freq is None else args.eval_freq,
+        eval_episodes=base.eval_episodes if args.eval_episodes is None else args.eval_episodes,
         throughput=ThroughputSettings(
             env_ids=tuple(args.envs),
-            steps=args.throughput_steps or base.throughput.steps,
-            repeats=args.throughput_repeats or base.throughput.repeats,
+            steps=base.throughput.steps if args.throughput_steps is None else args.throughput_steps,
+            repeats=base.throughput.repeats if args.throughput_repeats is None else args.throughput_repeats,
         ),
     )
     results_dir = args.results_dir or (QUICK_RESULTS_DIR if args.quick else DEFAULT_RESULTS_DIR)
@@ -237,6 +254,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     console = Console()
 
     specs = make_specs(settings, args.envs, args.algos, overrides)
+    if not specs:
+        parser.error(f"--seeds {settings.seeds} and --peer-seeds {settings.peer_seeds}: no run of {args.algos} to make")
     pending = [spec for spec in specs if not (spec.run_dir(args.cache_dir) / RUN_FILE).exists()]
     start = time.perf_counter()
     status = run_missing_runs(len(specs), pending, args.workers, args.cache_dir, console, args.scheduler)

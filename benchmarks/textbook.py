@@ -51,6 +51,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 import sb3_classic
 from sb3_classic import REINFORCE, NStepSARSA, TileCoding
 from sb3_classic.envs import RANDOM_WALK_19_TRUE_VALUES, SHORT_CORRIDOR_OPTIMAL_VALUE
+from sb3_classic.harness.common import positive_int
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_CACHE_DIR = REPO_ROOT / "benchmarks" / "cache" / "textbook"
@@ -979,13 +980,20 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         "--quick", action="store_true", help="tiny runs, the whole pipeline in about a minute (scratch output)"
     )
     parser.add_argument("--full-grid", action="store_true", help="the book's α grids for Figs 7.2 and 10.4 (much longer)")
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="runs in parallel (default: the cores)")
+    parser.add_argument(
+        "--workers", type=positive_int, default=os.cpu_count() or 1, help="runs in parallel (default: the cores)"
+    )
     parser.add_argument("--report-only", action="store_true", help="train nothing: draw what the cache holds")
     parser.add_argument("--cache-dir", type=Path, default=DEFAULT_CACHE_DIR)
     parser.add_argument(
         "--results-dir", type=Path, default=None, help="default: benchmarks/results/textbook/ (--quick: scratch)"
     )
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    try:
+        parse_runs(args.runs, DEFAULT.runs)
+    except ValueError as error:
+        parser.error(str(error))
+    return args
 
 
 def make_plan(args: argparse.Namespace) -> Plan:

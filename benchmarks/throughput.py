@@ -29,7 +29,14 @@ from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 
 from benchmarks.common import DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR, overrides_from_args
 from benchmarks.report import markdown_table
-from sb3_classic.harness.common import LABELS, code_versions, hyperparams_path, load_hyperparams, register_algorithms
+from sb3_classic.harness.common import (
+    LABELS,
+    code_versions,
+    hyperparams_path,
+    load_hyperparams,
+    positive_int,
+    register_algorithms,
+)
 
 THROUGHPUT_ALGOS = ("a2c", "reinforce", "nstep_sarsa")
 BASELINE = "a2c"
@@ -308,9 +315,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="2,000 steps, 3 repeats, written to the scratch folder")
     parser.add_argument("--envs", nargs="+", default=list(ENV_IDS), choices=ENV_IDS, help="envs to measure")
-    parser.add_argument("--n-envs", nargs="+", type=int, default=[1, 8], help="numbers of envs to measure with")
-    parser.add_argument("--steps", type=int, help="env steps of each timed learn() (default 20,000)")
-    parser.add_argument("--repeats", type=int, help="timed learn() calls per algorithm and setting (default 5)")
+    parser.add_argument("--n-envs", nargs="+", type=positive_int, default=[1, 8], help="numbers of envs to measure with")
+    parser.add_argument("--steps", type=positive_int, help="env steps of each timed learn() (default 20,000)")
+    parser.add_argument("--repeats", type=positive_int, help="timed learn() calls per algorithm and setting (default 5)")
     parser.add_argument("--results-dir", type=Path, help=f"where to write (default {DEFAULT_RESULTS_DIR})")
     parser.add_argument(
         "--set",
@@ -326,8 +333,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     settings = ThroughputSettings(
         env_ids=tuple(args.envs),
         n_envs=tuple(args.n_envs),
-        steps=args.steps or quick.steps,
-        repeats=args.repeats or quick.repeats,
+        steps=quick.steps if args.steps is None else args.steps,
+        repeats=quick.repeats if args.repeats is None else args.repeats,
         overrides=overrides,
     )
     results_dir = args.results_dir or (QUICK_RESULTS_DIR if args.quick else DEFAULT_RESULTS_DIR)

@@ -11,13 +11,14 @@ import time
 from concurrent.futures import Future
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
 import pytest
 from rich.console import Console
 
-from benchmarks import hot_paths
+from benchmarks import hot_paths, per_step_speed, textbook
 from benchmarks.common import REPO_ROOT, parse_overrides
 from benchmarks.diagnostics.common import Variant, collect
 from benchmarks.report import (
@@ -313,6 +314,32 @@ def test_throughput_set_needs_a_results_dir(capsys: pytest.CaptureFixture[str]) 
     assert "--set needs --results-dir" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    ("command", "argv", "message"),
+    [
+        # 0 used to be taken as "the default" (`args.steps or default`): --steps 0 --repeats 0 ran the full benchmark
+        (throughput_main, ["--steps", "0"], "--steps: '0' is not an integer >= 1"),
+        (throughput_main, ["--steps", "-100"], "--steps: '-100' is not an integer >= 1"),
+        (throughput_main, ["--n-envs", "0"], "--n-envs: '0' is not an integer >= 1"),
+        (main, ["--seeds", "-3"], "--seeds: '-3' is not an integer >= 0"),
+        (main, ["--algos", "a2c", "--peer-seeds", "0"], "no run of ['a2c'] to make"),
+        (main, ["--eval-freq", "0"], "--eval-freq: '0'"),
+        (main, ["--workers", "0"], "--workers: '0'"),
+        (main, ["--budget", "CartPol-v1=100"], "'CartPol-v1' is not one of the envs benchmarked"),
+        (textbook.main, ["--runs", "7.3=4"], "'7.3' is not one of the figures"),
+        (textbook.main, ["--workers", "0"], "--workers: '0'"),
+        (per_step_speed.main, ["--repeats", "zero"], "--repeats: 'zero' is not an integer >= 1"),
+    ],
+)
+def test_benchmark_counts_are_refused_as_usage_errors(
+    command: Any, argv: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exit_:
+        command(argv)
+    assert exit_.value.code == 2
+    assert message in capsys.readouterr().err
+
+
 def test_hot_paths_variants_are_what_they_say() -> None:
     implementations = {}
     for name, kwargs in hot_paths.ADAM_VARIANTS.items():
@@ -433,6 +460,9 @@ def test_benchmark_set_changes_only_the_named_algorithms_entries() -> None:
         ("max_grad_norm=10", "write ALGO.KEY=VALUE"),
         ("nstep_sarsa.max_grad_norm", "write ALGO.KEY=VALUE"),
         ("ppo.ent_coef=0.1", "'ppo' is not one"),
+        # A typo would otherwise fail every run, each with a TypeError from the constructor
+        ("nstep_sarsa.n_step=3", "did you mean 'n_steps'?"),
+        ("nstep_sarsa.n_timesteps=3", "--budget"),
     ],
 )
 def test_benchmark_set_errors_name_the_value(value: str, message: str) -> None:

@@ -464,6 +464,41 @@ def test_reduced_runs_of_other_budgets_keep_their_own_outputs(tmp_path: Path) ->
     assert "--seeds 2 --episodes 3`" in (reduced / "seeds-2_episodes-3" / "STUDIES.md").read_text()
 
 
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        # Each used to run (or cache as done) nonsense: -5 episodes per run, 0 seeds, a table of nan, exit status 0
+        (["--episodes", "-5"], "--episodes: '-5' is not an integer >= 1"),
+        (["--steps", "0"], "--steps: '0' is not an integer >= 1"),
+        (["--seeds", "0"], "--seeds: '0' is not an integer >= 1"),
+        (["--workers", "0"], "--workers: '0' is not an integer >= 1"),
+    ],
+)
+def test_reduced_run_counts_are_usage_errors(
+    tmp_path: Path, options: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exit_:
+        studies_cli.main([str(write_study(tmp_path, TINY)), "--list", "--cache-dir", str(tmp_path), *options])
+    assert exit_.value.code == 2
+    assert message in capsys.readouterr().err
+
+
+def test_a_step_budget_is_refused_where_a_claim_counts_episodes(tmp_path: Path) -> None:
+    # The file's own check ("episodes_to_threshold needs a budget in episodes") was bypassed by --steps
+    text = TINY.replace("others: [n1]}", "others: [n1], metric: episodes_to_threshold}")
+    study = load_study(write_study(tmp_path, text))
+    with pytest.raises(StudyError, match="--steps 300: a claim of this study is on episodes_to_threshold"):
+        study.with_budget(steps=300)
+    assert study.with_budget(episodes=3).budget.episodes == 3
+    with pytest.raises(StudyError, match="--seeds 0: give an integer >= 1"):
+        study.with_budget(seeds=0)
+    output = io.StringIO()
+    with contextlib.redirect_stdout(output):
+        status = studies_cli.main([str(tmp_path / "study.yml"), "--list", "--cache-dir", str(tmp_path), "--steps", "300"])
+    assert status == 2
+    assert "give --episodes" in " ".join(output.getvalue().split())
+
+
 def test_the_compute_counts_each_shared_run_once(tmp_path: Path) -> None:
     # Two studies that share a run (the same settings, e.g. a report's baseline in two figures): STUDIES.md's compute
     # is that of the distinct runs; a study's own table still counts all of its runs

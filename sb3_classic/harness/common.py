@@ -3,8 +3,11 @@ What a run of the harness is: the algorithms and their hyperparameters (this pac
 the others), the versions a result depends on, and the cache key of a run.
 """
 
+import argparse
 import hashlib
+import inspect
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -35,9 +38,46 @@ ZOO_HYPERPARAMS_DIR = Path(rl_zoo3.__file__).resolve().parent / "hyperparams"
 HARNESS_PACKAGES = ("harness", "studies")
 
 
+#: Keys of a zoo YAML entry that the zoo consumes itself (not constructor arguments)
+ZOO_KEYS = frozenset(
+    {"n_envs", "normalize", "normalize_kwargs", "env_wrapper", "vec_env_wrapper", "callback", "frame_stack", "policy"}
+)
+
+
 def register_algorithms() -> None:
     """Put ``reinforce`` and ``nstep_sarsa`` into ``rl_zoo3.ALGOS``, so that the zoo's ExperimentManager builds them."""
     zoo.register()
+
+
+def algorithm_arguments(algo: str) -> set[str]:
+    """:return: the constructor arguments of ``rl_zoo3.ALGOS[algo]``"""
+    register_algorithms()
+    return set(inspect.signature(rl_zoo3.ALGOS[algo].__init__).parameters) - {"self", "env", "_init_setup_model"}
+
+
+def int_at_least(minimum: int) -> Callable[[str], int]:
+    """
+    An ``argparse`` type for counts (seeds, episodes, env steps, workers, repeats), so that a count below ``minimum``
+    is a usage error before any work, not an empty run, a default taken instead, or a traceback.
+
+    :param minimum: the smallest count allowed
+    :return: the type: it returns the option's value as an int, or raises ``argparse.ArgumentTypeError``
+    """
+
+    def count(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = minimum - 1
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer >= {minimum}")
+        return value
+
+    return count
+
+
+#: ``int_at_least(1)``
+positive_int = int_at_least(1)
 
 
 def hyperparams_path(algo: str) -> Path:

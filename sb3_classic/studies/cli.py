@@ -15,6 +15,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.markup import escape
 
+from sb3_classic.harness.common import positive_int
 from sb3_classic.harness.pool import report_missing, run_missing_runs
 from sb3_classic.harness.runner import RUN_FILE, RunError, check_run
 from sb3_classic.studies.outputs import PROGRAM, load_study_results, plural, study_command, write_studies_index, write_study
@@ -95,10 +96,12 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
         prog=f"python -m {defaults.program}", description=description, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("studies", nargs="+", type=Path, help="study files (YAML), or folders of them")
-    parser.add_argument("--seeds", type=int, help="seeds 0 to K − 1 instead of the files' (a reduced run)")
-    parser.add_argument("--episodes", type=int, help="episodes per run instead of the files' budget (a reduced run)")
-    parser.add_argument("--steps", type=int, help="env steps per run instead of the files' budget (a reduced run)")
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="runs in parallel (default: the cores)")
+    parser.add_argument("--seeds", type=positive_int, help="seeds 0 to K − 1 instead of the files' (a reduced run)")
+    parser.add_argument("--episodes", type=positive_int, help="episodes per run instead of the files' budget (a reduced run)")
+    parser.add_argument("--steps", type=positive_int, help="env steps per run instead of the files' budget (a reduced run)")
+    parser.add_argument(
+        "--workers", type=positive_int, default=os.cpu_count() or 1, help="runs in parallel (default: the cores)"
+    )
     parser.add_argument(
         "--scheduler", metavar="tcp://HOST:PORT", help="run on the Dask cluster of this scheduler (needs the dask extra)"
     )

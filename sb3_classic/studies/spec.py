@@ -31,7 +31,6 @@ The format (the README of the repository's ``benchmarks/studies/`` has the long 
 
 import dataclasses
 import difflib
-import inspect
 import math
 from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -42,12 +41,8 @@ import gymnasium
 import rl_zoo3
 import yaml
 
-from sb3_classic.harness.common import THRESHOLDS, RunSpec, register_algorithms
+from sb3_classic.harness.common import THRESHOLDS, ZOO_KEYS, RunSpec, algorithm_arguments, register_algorithms
 
-#: Keys of a zoo YAML entry that the zoo consumes itself (not constructor arguments)
-ZOO_KEYS = frozenset(
-    {"n_envs", "normalize", "normalize_kwargs", "env_wrapper", "vec_env_wrapper", "callback", "frame_stack", "policy"}
-)
 METRICS = ("mean_return", "last_100_return", "episodes_to_threshold")
 CLAIM_KINDS = ("better", "similar", "reaches", "below")
 STATISTICS = ("mean", "std")
@@ -227,7 +222,24 @@ class StudySpec:
         return runs
 
     def with_budget(self, seeds: int | None = None, episodes: int | None = None, steps: int | None = None) -> "StudySpec":
-        """:return: the same study with fewer (or more) seeds, or another budget (a reduced run: scratch results)"""
+        """
+        :param seeds: seeds 0 to ``seeds`` − 1 instead of the file's
+        :param episodes: training episodes per run instead of the file's budget
+        :param steps: env steps per run instead of the file's budget
+        :return: the same study with fewer (or more) seeds, or another budget (a reduced run: scratch results)
+        :raise StudyError: if a count is not an integer ≥ 1, if both budgets are given, or if ``steps`` is given to a
+            study that claims on ``episodes_to_threshold`` (which needs a budget in episodes, as in the file)
+        """
+        for option, value in (("--seeds", seeds), ("--episodes", episodes), ("--steps", steps)):
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
+                raise StudyError(f"{option} {value!r}: give an integer >= 1")
+        if episodes is not None and steps is not None:
+            raise StudyError("--episodes and --steps: give one budget")
+        if steps is not None and any(claim.metric == "episodes_to_threshold" for claim in self.claims):
+            raise StudyError(
+                f"{self.path or self.name}: --steps {steps}: a claim of this study is on episodes_to_threshold, which "
+                "needs a budget in episodes (each seed would have its own episode count to censor at): give --episodes"
+            )
         budget = self.budget
         if episodes is not None:
             budget = Budget(episodes=episodes, max_steps=budget.max_steps)
@@ -276,12 +288,6 @@ def policy_kwargs_string(kwargs: Mapping[str, Any]) -> str:
         return repr(value)
 
     return code(kwargs)
-
-
-def algorithm_arguments(algo: str) -> set[str]:
-    """:return: the constructor arguments of ``rl_zoo3.ALGOS[algo]``"""
-    register_algorithms()
-    return set(inspect.signature(rl_zoo3.ALGOS[algo].__init__).parameters) - {"self", "env", "_init_setup_model"}
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
