@@ -582,10 +582,12 @@ def test_discrete_observations_returned_as_python_ints(model_class: type[BaseAlg
     # and the check for NaN in it failed on the int ('int' object has no attribute 'dtype'), as A2C and DQN do not
     env = make_vec_env(lambda: gym.wrappers.TimeLimit(DiscreteWalk(as_dict), max_episode_steps=3), n_envs=2)
     policy = "MultiInputPolicy" if as_dict else "MlpPolicy"
-    model = model_class(policy, env, seed=0, device="cpu")
+    model: Any = model_class(policy, env, seed=0, device="cpu")  # type: ignore[call-arg]
     model.learn(60)
     assert model.num_timesteps >= 60
-    assert all_finite(3) and all_finite({"state": 3, "noise": np.zeros(2)}) and not all_finite(math.nan)
+    assert all_finite(3)
+    assert all_finite({"state": 3, "noise": np.zeros(2)})
+    assert not all_finite(math.nan)
 
 
 @pytest.mark.parametrize("model_class", MODEL_LIST)
@@ -623,6 +625,13 @@ REFUSED_INPUTS = [
     (NStepSARSA, dict(policy_kwargs=dict(with_bias="False")), TypeError, "with_bias='False'"),
     (REINFORCE, dict(lr_decay_factor=0.5, lr_decay_milestones=[]), ValueError, "lr_decay_milestones=[] has no milestone"),
     (NStepSARSA, dict(gradient_steps=-1), ValueError, "DQN's -1"),
+    # Passed to SB3, which takes their truth: share_features_extractor="False" shared it
+    (REINFORCE, dict(policy_kwargs=dict(share_features_extractor="False")), TypeError, "share_features_extractor='False'"),
+    (NStepSARSA, dict(policy_kwargs=dict(normalize_images="False")), TypeError, "normalize_images='False'"),
+    # Infinity passed the "> 0" checks: NaN weights (SARSA) or a multinomial error deep in the first update (REINFORCE)
+    (NStepSARSA, dict(learning_rate=math.inf), ValueError, "learning_rate=inf must be finite and > 0"),
+    (REINFORCE, dict(value_learning_rate=math.inf), ValueError, "value_learning_rate=inf must be finite"),
+    (REINFORCE, dict(ent_coef=math.inf), ValueError, "ent_coef=inf must be a number in [0.0, inf)"),
 ]
 
 

@@ -1,6 +1,6 @@
 """The rollout buffer shared by REINFORCE and n-step SARSA: whole trajectories, kept across updates until used."""
 
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, SupportsFloat
 
 import numpy as np
 import torch as th
@@ -50,7 +50,7 @@ def select(observations: Observations, index: Any) -> Observations:
     return observations[index]
 
 
-def all_finite(observations: Observations) -> bool:
+def all_finite(observations: Observations | SupportsFloat | dict[str, Any]) -> bool:
     """
     :param observations: a batch of observations (an array, or a dict of arrays), or one observation as the env
         returned it (a VecEnv's ``terminal_observation``: a plain Python int for a ``Discrete`` space)

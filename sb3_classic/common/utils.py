@@ -1,5 +1,6 @@
 """Argument checks shared by the algorithms: each error names the argument, the value and what to pass instead."""
 
+import math
 import numbers
 from collections.abc import Sequence
 from typing import Any
@@ -18,8 +19,10 @@ def check_learning_rate(name: str, value: float | Schedule) -> None:
         start, end = FloatSchedule(value)(1.0), FloatSchedule(value)(0.0)
     except (AssertionError, TypeError) as error:
         raise TypeError(f"{name}={value!r} must be a float or an SB3 schedule (e.g. LinearSchedule)") from error
-    if not start > 0 or not end >= 0:
-        raise ValueError(f"{name}={value!r} must be > 0 (a learning rate of {start} at the start, {end} at the end)")
+    if not (start > 0 and end >= 0 and math.isfinite(start) and math.isfinite(end)):
+        raise ValueError(
+            f"{name}={value!r} must be finite and > 0 (a learning rate of {start} at the start, {end} at the end)"
+        )
 
 
 def check_range(name: str, value: Any, low: float, high: float, *, low_open: bool = False, hint: str = "") -> None:
@@ -27,15 +30,16 @@ def check_range(name: str, value: Any, low: float, high: float, *, low_open: boo
     :param name: the argument's name
     :param value: the number to check
     :param low: smallest allowed value
-    :param high: largest allowed value
+    :param high: largest allowed value; ``math.inf`` for no bound, which excludes infinity itself (an infinite
+        coefficient would turn the first loss into NaN)
     :param low_open: exclude ``low`` itself
     :param hint: what to pass instead, appended to the message
     """
     # Any real number (NumPy's included), not a bool
     number = isinstance(value, numbers.Real) and not isinstance(value, bool)
-    ok = number and (low < value if low_open else low <= value) and value <= high
+    ok = number and (low < value if low_open else low <= value) and (value <= high if math.isfinite(high) else value < high)
     if not ok:
-        interval = f"{'(' if low_open else '['}{low}, {high}]"
+        interval = f"{'(' if low_open else '['}{low}, {high}{']' if math.isfinite(high) else ')'}"
         raise ValueError(f"{name}={value!r} must be a number in {interval}{'. ' + hint if hint else ''}")
 
 

@@ -81,6 +81,9 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         check_net_arch(net_arch, keys=("pi", "vf"))
         check_bool("with_bias", with_bias)
         check_bool("use_baseline", use_baseline)
+        # SB3's ActorCriticPolicy takes their truth: share_features_extractor="False" would share it
+        check_bool("share_features_extractor", share_features_extractor)
+        check_bool("normalize_images", normalize_images)
         super().__init__(
             observation_space,
             action_space,

@@ -100,6 +100,7 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         check_net_arch(net_arch)
         check_bool("with_bias", with_bias)
         check_bool("layer_norm", layer_norm)
+        check_bool("normalize_images", normalize_images)
         if net_arch is None:
             net_arch = [] if features_extractor_class == NatureCNN else [64, 64]
         self.net_arch = net_arch
