@@ -17,7 +17,8 @@ What ``register()`` changes in rl-zoo3, and nothing else:
 - ``ExperimentManager._preprocess_schedules`` also reads ``value_learning_rate`` (REINFORCE's second learning rate)
   as the zoo reads ``learning_rate``: ``lin_0.01`` for a linear schedule;
 - the names a YAML's ``policy_kwargs`` string may use (the zoo evaluates it in ``rl_zoo3.exp_manager``'s namespace,
-  which has ``th`` and ``nn``) gain ``TileCoding``, the book's features (``features_extractor_class=TileCoding``).
+  which has ``th`` and ``nn``), and a ``-params`` value (evaluated in ``rl_zoo3.utils``'s), gain ``TileCoding``, the
+  book's features (``features_extractor_class=TileCoding``).
 """
 
 import functools
@@ -247,12 +248,13 @@ def _dict_attribute(module: ModuleType, name: str, version: str) -> dict[str, An
     return table
 
 
-def _zoo_targets() -> tuple[dict[str, Any], dict[str, Any], dict[str, Any], type, dict[str, Any]]:
+def _zoo_targets() -> tuple[dict[str, Any], dict[str, Any], dict[str, Any], type, list[dict[str, Any]]]:
     """
     Import what ``register()`` patches, checking that it is there and has the expected shape.
 
-    :return: ``ALGOS``, ``HYPERPARAMS_SAMPLER``, ``HYPERPARAMS_CONVERTER``, ``ExperimentManager``, and the namespace
-        the zoo evaluates a YAML's ``policy_kwargs`` string in (``rl_zoo3.exp_manager``'s)
+    :return: ``ALGOS``, ``HYPERPARAMS_SAMPLER``, ``HYPERPARAMS_CONVERTER``, ``ExperimentManager``, and the namespaces
+        the zoo evaluates a YAML's ``policy_kwargs`` string in (``rl_zoo3.exp_manager``'s) and a ``-params`` value in
+        (``rl_zoo3.utils``'s ``StoreDict``)
     """
     try:
         import rl_zoo3
@@ -277,7 +279,7 @@ def _zoo_targets() -> tuple[dict[str, Any], dict[str, Any], dict[str, Any], type
         raise _incompatible(version, "ExperimentManager.__init__ has no 'algo' and 'config' arguments")
     if not isinstance(inspect.getattr_static(manager, "_preprocess_schedules", None), staticmethod):
         raise _incompatible(version, "ExperimentManager._preprocess_schedules is not a static method")
-    return algos, samplers, converters, manager, vars(exp_manager)
+    return algos, samplers, converters, manager, [vars(exp_manager), vars(utils)]
 
 
 def _patch_default_config(manager: type) -> None:
@@ -335,12 +337,13 @@ def register() -> None:
         return
     _registering = True
     try:
-        algos, samplers, converters, manager, yaml_namespace = _zoo_targets()
+        algos, samplers, converters, manager, yaml_namespaces = _zoo_targets()
     finally:
         _registering = False
     # A name the zoo itself defines there is left alone
-    for name, value in YAML_NAMES.items():
-        yaml_namespace.setdefault(name, value)
+    for namespace in yaml_namespaces:
+        for name, value in YAML_NAMES.items():
+            namespace.setdefault(name, value)
     algos.update(ALGORITHMS)
     samplers.update(SAMPLERS)
     converters.update(CONVERTERS)

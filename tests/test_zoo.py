@@ -247,11 +247,18 @@ def test_register_is_idempotent() -> None:
         assert HYPERPARAMS_CONVERTER[algo] is CONVERTERS[algo]
     assert ExperimentManager.__init__ is init
     assert ExperimentManager._preprocess_schedules is preprocess
-    # The names a YAML's policy_kwargs string may use, where the zoo evaluates it
+    # The names a YAML's policy_kwargs string and a -params value may use, where the zoo evaluates them
     import rl_zoo3.exp_manager
+    import rl_zoo3.utils
 
     for name, value in YAML_NAMES.items():
         assert vars(rl_zoo3.exp_manager)[name] is value
+        assert vars(rl_zoo3.utils)[name] is value
+    # ... as the zoo's train.py parses -params (a NameError: name 'TileCoding' is not defined, before)
+    parser = argparse.ArgumentParser()
+    parser.add_argument("-params", nargs="+", action=rl_zoo3.utils.StoreDict)
+    value = "dict(net_arch=[], features_extractor_class=TileCoding)"
+    assert parser.parse_args(["-params", f"policy_kwargs:{value}"]).params["policy_kwargs"] == eval_policy_kwargs(value)
     # Each is wrapped once
     patched: Any
     for patched in (init, preprocess):
