@@ -296,8 +296,8 @@ def test_image_and_dict_observations(model_class: type[Any], policy: str, env: A
 
 
 INVALID_ARGUMENTS = [
-    (REINFORCE, dict(learning_rate=-1.0), "learning_rate=-1.0 must be > 0"),
-    (REINFORCE, dict(value_learning_rate=0.0), "value_learning_rate=0.0 must be > 0"),
+    (REINFORCE, dict(learning_rate=-1.0), "learning_rate=-1.0 must be finite and > 0"),
+    (REINFORCE, dict(value_learning_rate=0.0), "value_learning_rate=0.0 must be finite and > 0"),
     (REINFORCE, dict(learning_rate="fast"), "learning_rate='fast' must be a float or an SB3 schedule"),
     (REINFORCE, dict(gamma=1.5), r"gamma=1.5 must be a number in \[0.0, 1.0\]"),
     (REINFORCE, dict(n_episodes=0), "n_episodes=0 must be an integer >= 1"),
@@ -317,7 +317,7 @@ INVALID_ARGUMENTS = [
     # A DQN user's argument alone: the default exponential schedule would ignore it
     (NStepSARSA, dict(exploration_fraction=0.2), "exploration_fraction=0.2 .* exploration_schedule='linear'"),
     (NStepSARSA, dict(exploration_schedule="linear", exploration_fraction=0.0), "exploration_fraction=0.0"),
-    (NStepSARSA, dict(learning_rate=0.0), "learning_rate=0.0 must be > 0"),
+    (NStepSARSA, dict(learning_rate=0.0), "learning_rate=0.0 must be finite and > 0"),
     (NStepSARSA, dict(gamma=-0.1), "gamma=-0.1"),
     (NStepSARSA, dict(train_freq=0), "train_freq=0"),
     (NStepSARSA, dict(train_freq=(4, "step")), r"train_freq=\(4, 'step'\) must be an integer >= 1.*tuple form"),

@@ -23,8 +23,10 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.utils import FloatSchedule, LinearSchedule
 from stable_baselines3.common.vec_env import DummyVecEnv
+from stable_baselines3.dqn.policies import DQNPolicy
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 from test_contract import make_model, parameters_equal
 from test_zoo import run
@@ -654,6 +656,14 @@ def test_inputs_that_would_be_taken_silently_are_refused(
 )
 def test_their_valid_neighbours_are_accepted(model_class: type[BaseAlgorithm], kwargs: dict[str, Any]) -> None:
     make_model(model_class, **kwargs).learn(32)
+
+
+@pytest.mark.parametrize(("model_class", "policy"), [(REINFORCE, ActorCriticPolicy), (NStepSARSA, DQNPolicy)])
+def test_a_policy_class_of_another_algorithm_is_named_as_such(model_class: type[BaseAlgorithm], policy: type) -> None:
+    # It failed on this package's own policy_kwargs ("policy_kwargs: ... unexpected keyword argument 'weight_init'"),
+    # which the user had not passed
+    with pytest.raises(TypeError, match=rf"policy=.*{policy.__name__} is not one of {model_class.__name__}'s policies: "):
+        model_class(policy, "CartPole-v1", device="cpu")  # type: ignore[call-arg]
 
 
 @pytest.mark.parametrize(("saved_class", "loading_class"), [(REINFORCE, NStepSARSA), (NStepSARSA, REINFORCE)])

@@ -188,7 +188,7 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
                 "episodes or updates, like StepLR) or lr_decay_milestones (like MultiStepLR): pass one of them"
             )
         if self.max_episode_length is not None:
-            check_positive_int("max_episode_length", self.max_episode_length, hint="or None for no cap")
+            check_positive_int("max_episode_length", self.max_episode_length, hint="Pass None for no cap")
 
     @abstractmethod
     def _make_policy(self) -> BasePolicy:
@@ -205,6 +205,9 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         self._action_offset = action_offset(self.action_space)
         self.set_random_seed(self.seed)
         self._make_buffer()
+        own_policies = tuple(self.policy_aliases.values())
+        if own_policies and not (isinstance(self.policy_class, type) and issubclass(self.policy_class, own_policies)):
+            raise TypeError(self._foreign_policy_message())
         try:
             policy = self._make_policy()
         except TypeError as error:
@@ -213,16 +216,23 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
             raise TypeError(f"policy_kwargs: {error}. {self._policy_kwargs_hint()}") from error
         self.policy = policy.to(self.device)
 
+    def _foreign_policy_message(self) -> str:
+        """
+        :return: the error of a policy class that is not one of this algorithm's (e.g. SB3's ``ActorCriticPolicy``
+            passed to REINFORCE, or a file saved by another algorithm: ``load()`` takes the saved policy class)
+        """
+        name = getattr(self.policy_class, "__qualname__", repr(self.policy_class))
+        aliases = ", ".join(repr(alias) for alias in self.policy_aliases)
+        base = self.policy_aliases.get("MlpPolicy")  # the others subclass it
+        own = base.__name__ if base is not None else ", ".join(policy.__name__ for policy in self.policy_aliases.values())
+        return (
+            f"policy={getattr(self.policy_class, '__module__', '')}.{name} is not one of {type(self).__name__}'s "
+            f"policies: pass {aliases}, or a subclass of {own}. If this model was loaded from a file, the file was "
+            "saved by another algorithm; load it with that algorithm's class (e.g. REINFORCE.load or NStepSARSA.load)"
+        )
+
     def _policy_kwargs_hint(self) -> str:
         """:return: what ``policy_kwargs`` takes, for the error of an unknown key"""
-        own_policies = tuple(self.policy_aliases.values())
-        if own_policies and not issubclass(self.policy_class, own_policies):
-            # A file saved by another algorithm (load() takes the saved policy class): its policy is not ours
-            return (
-                f"The policy class is {self.policy_class.__module__}.{self.policy_class.__qualname__}, not one of "
-                f"{type(self).__name__}'s: if this model was loaded from a file, the file was saved by another "
-                "algorithm; load it with that algorithm's class (e.g. REINFORCE.load or NStepSARSA.load)"
-            )
         parameters = [name for name in inspect.signature(self.policy_class).parameters if name not in _POLICY_ARGUMENTS]
         return (
             f"{type(self).__name__}'s policy takes {', '.join(parameters)} "

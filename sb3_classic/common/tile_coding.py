@@ -362,7 +362,9 @@ class TileCoding(BaseFeaturesExtractor):
     def forward(self, observations: th.Tensor) -> th.Tensor:
         """
         :param observations: a batch of observations, shape (batch, *obs_shape)
-        :return: the binary tile features x(s), shape (batch, features_dim), float32, n_tilings ones per row
+        :return: the tile features x(s), shape (batch, features_dim), float32: binary, n_tilings ones per row; with
+            ``hash_size``, the count of tilings hashed to each feature (collisions give 2 or more; each row sums to
+            n_tilings)
         """
         if observations.device.type == "cpu" and self.hash_size is None:
             return th.from_numpy(self._dense_features_numpy(observations.detach().numpy()))

@@ -268,7 +268,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         check_choice("loss_function", self.loss_function, ("mse", "huber"))
         check_range("td_lambda", self.td_lambda, 0.0, 1.0, hint="1.0 is the n-step return G_{t:t+n} (S&B §10.2)")
         if self.target_update_interval is not None:
-            check_positive_int("target_update_interval", self.target_update_interval, hint="or None for no target network")
+            check_positive_int("target_update_interval", self.target_update_interval, hint="Pass None for no target network")
         check_range("tau", self.tau, 0.0, 1.0, low_open=True, hint="1.0 copies q̂ at every target update")
         if self.target_update_interval is None and self.tau != 1.0:
             raise ValueError(
