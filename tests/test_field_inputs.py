@@ -383,11 +383,13 @@ def test_sarsa_logs_the_means_of_its_updates_predictions_and_targets(update_mode
     )
     model.learn(64)  # past the first updates, whose batches can be shorter
     steps: list[tuple[th.Tensor, th.Tensor]] = []
+    losses: list[float] = []
     gradient_step = model._gradient_step
 
     def recorded(observations: th.Tensor, actions: th.Tensor, targets: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
         q_predicted, loss = gradient_step(observations, actions, targets)
         steps.append((q_predicted, targets))
+        losses.append(float(loss))
         return q_predicted, loss
 
     model._gradient_step = recorded
@@ -401,6 +403,9 @@ def test_sarsa_logs_the_means_of_its_updates_predictions_and_targets(update_mode
     assert dumped["train/n_transitions"] == len(targets) >= 2
     assert dumped["train/q_mean"] == pytest.approx(float(q_first.double().mean()), rel=1e-6)
     assert dumped["train/target_mean"] == pytest.approx(float(targets.double().mean()), rel=1e-6)
+    # The mean of every gradient step's loss, as SB3's DQN logs it (it was the last step's)
+    assert len(losses) == model.gradient_steps * (len(targets) if update_mode == "per_step" else 1)
+    assert dumped["train/loss"] == pytest.approx(math.fsum(losses) / len(losses), rel=1e-5)
 
 
 @pytest.mark.parametrize("model_class", MODEL_LIST)
@@ -634,6 +639,15 @@ REFUSED_INPUTS = [
     (NStepSARSA, dict(learning_rate=math.inf), ValueError, "learning_rate=inf must be finite and > 0"),
     (REINFORCE, dict(value_learning_rate=math.inf), ValueError, "value_learning_rate=inf must be finite"),
     (REINFORCE, dict(ent_coef=math.inf), ValueError, "ent_coef=inf must be a number in [0.0, inf)"),
+    # A constant initialisation of hidden layers: every hidden unit stays identical, only the output biases learn
+    (REINFORCE, dict(policy_kwargs=dict(weight_init=0.0)), ValueError, "weight_init=0.0 sets every weight to one number"),
+    (NStepSARSA, dict(policy_kwargs=dict(weight_init=0.1)), ValueError, "has 2 hidden layer(s)"),
+    # The exponential schedule is max(ε_final, ...): it would run at ε_final from the start
+    (NStepSARSA, dict(exploration_initial_eps=0.0), ValueError, "exploration_initial_eps=0.0 is below exploration_final_eps"),
+    # Set by the algorithm from its own argument (Python's "got multiple values for keyword argument" before)
+    (NStepSARSA, dict(policy_kwargs=dict(target_network=True)), TypeError, "pass target_update_interval=... to NStepSARSA"),
+    (REINFORCE, dict(policy_kwargs=dict(use_baseline=False)), TypeError, "pass use_baseline=... to REINFORCE"),
+    (REINFORCE, dict(max_grad_norm="0.5"), TypeError, "max_grad_norm='0.5' must be a number > 0"),
 ]
 
 
@@ -652,6 +666,10 @@ def test_inputs_that_would_be_taken_silently_are_refused(
         (REINFORCE, dict(policy_kwargs=dict(net_arch=[]), use_baseline=np.bool_(False))),
         (NStepSARSA, dict(policy_kwargs=dict(net_arch=(np.int64(16),), activation_fn=th.nn.Tanh))),
         (NStepSARSA, dict(target_update_interval=10, tau=0.5, expected_sarsa=np.True_)),
+        (NStepSARSA, dict(policy_kwargs=dict(net_arch=[], weight_init=np.float32(0.0)))),
+        (REINFORCE, dict(policy_kwargs=dict(net_arch=[], weight_init=0.5), max_grad_norm=np.float32(1.0))),
+        (NStepSARSA, dict(exploration_initial_eps=0.0, exploration_final_eps=0.0)),
+        (NStepSARSA, dict(exploration_initial_eps=0.0, exploration_final_eps=0.5, exploration_schedule="linear")),
     ],
 )
 def test_their_valid_neighbours_are_accepted(model_class: type[BaseAlgorithm], kwargs: dict[str, Any]) -> None:

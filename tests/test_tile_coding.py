@@ -6,6 +6,7 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -313,11 +314,27 @@ BOX = spaces.Box(np.array([-1.0, 0.0], dtype=np.float32), np.array([1.0, 5.0], d
         (BOX, dict(origin="centre"), "origin='centre'"),
         (spaces.Box(-np.inf, np.inf, (2,)), {}, r"low=None .* infinite .* pass a finite low"),
         (spaces.Box(-np.inf, np.inf, (2,)), dict(low=(0.0, 0.0)), r"high=None .* infinite .* pass a finite high"),
+        # A float count: "'float' object is not iterable" before
+        (BOX, dict(tiles_per_dim=8.0), r"tiles_per_dim=8.0 must be an integer >= 1"),
+        # 8 × 9^8 = 344M dense features (a 1.3 GiB row); at 12 dimensions the allocation failed deep in torch, at 20
+        # the tile indices overflowed int64 into negative ones, silently
+        (spaces.Box(0.0, 1.0, (8,)), {}, r"3.44e\+08 dense features, more than 16,777,216 .* pass hash_size"),
+        (spaces.Box(0.0, 1.0, (20,)), {}, r"dense features, more than 16,777,216 .* pass hash_size"),
     ],
 )
 def test_bad_arguments_raise_naming_them(space: spaces.Space, kwargs: dict, match: str) -> None:
     with pytest.raises(ValueError, match=match):
         TileCoding(space, **kwargs)
+
+
+def test_numpy_counts_and_hashed_large_spaces_are_accepted() -> None:
+    numpy_count: Any = np.int64(8)
+    assert TileCoding(BOX, tiles_per_dim=numpy_count).features_dim == TileCoding(BOX, tiles_per_dim=8).features_dim
+    coder = TileCoding(spaces.Box(0.0, 1.0, (20,)), hash_size=4096)
+    indices = coder.active_tiles(th.rand(5, 20))
+    assert indices.shape == (5, 8)
+    assert int(indices.min()) >= 0
+    assert int(indices.max()) < 4096
 
 
 def test_non_box_space_raises() -> None:

@@ -2,6 +2,7 @@
 
 import inspect
 import math
+import numbers
 import warnings
 from abc import abstractmethod
 from collections.abc import Sequence
@@ -61,7 +62,10 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         (like ``MultiStepLR``)
     :param lr_decay_unit: what the decay counts: ``"episode"`` (completed episodes, all envs together)
         or ``"update"`` (gradient steps, as SB3's ``train/n_updates`` counts them: a SARSA update of ``gradient_steps``
-        steps counts ``gradient_steps``)
+        steps counts ``gradient_steps``). The rate is set at the start of each update (``train()``, as SB3 sets its
+        learning rates) from the count so far: every gradient step of one update uses the same rate, and the decays
+        whose boundaries an update's steps pass apply together at the next update (REINFORCE's per-step mode: an
+        episode's T updates are one ``train()``)
     :param handle_timeout_termination: bootstrap from the value of the final state when an episode is cut by a time
         limit (``TimeLimit.truncated``), treating the limit as not part of the task (SB3's default); if False,
         a truncation ends the return like a termination
@@ -160,6 +164,8 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         """
         check_learning_rate("learning_rate", self.learning_rate)
         check_range("gamma", self.gamma, 0.0, 1.0, hint="0.99 is the usual choice")
+        if isinstance(self.max_grad_norm, bool) or not isinstance(self.max_grad_norm, numbers.Real):
+            raise TypeError(f"max_grad_norm={self.max_grad_norm!r} must be a number > 0, or None for no clipping")
         if not self.max_grad_norm > 0:
             raise ValueError(f"max_grad_norm={self.max_grad_norm!r} must be > 0, or None for no clipping")
         check_range("lr_decay_factor", self.lr_decay_factor, 0.0, 1.0, low_open=True, hint="1.0 means no decay")
@@ -215,6 +221,21 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
                 raise
             raise TypeError(f"policy_kwargs: {error}. {self._policy_kwargs_hint()}") from error
         self.policy = policy.to(self.device)
+
+    def _refuse_policy_kwargs_set_here(self, **arguments: str) -> None:
+        """
+        :param arguments: the policy's arguments that ``_make_policy`` sets itself, each with the argument of the
+            algorithm that sets it
+        :raises TypeError: if ``policy_kwargs`` gives one of them (Python's "got multiple values" otherwise), naming
+            the algorithm's argument to pass instead
+        """
+        for policy_argument, own_argument in arguments.items():
+            if policy_argument in self.policy_kwargs:
+                raise TypeError(
+                    f"policy_kwargs={{{policy_argument!r}: {self.policy_kwargs[policy_argument]!r}}}: "
+                    f"{type(self).__name__} sets the policy's {policy_argument} from its own {own_argument}: pass "
+                    f"{own_argument}=... to {type(self).__name__} instead"
+                )
 
     def _foreign_policy_message(self) -> str:
         """

@@ -41,6 +41,8 @@ ORIGINS = ("low", "zero")
 # The hash of hash_tiles: FNV-1's multiply-xor step (32-bit FNV prime and offset basis) modulo the Mersenne prime
 # 2^31 − 1, in int64 without overflow (every product is below 2^31 · 2^25).
 HASH_MODULUS = 2**31 - 1
+#: The most dense features (``hash_size=None``) a tile coder builds: 2^24, a 64 MiB float32 row; more needs hash_size
+MAX_DENSE_FEATURES = 2**24
 _HASH_MULTIPLIER = 16_777_619
 _HASH_BASIS = 2_166_136_261 % HASH_MODULUS
 
@@ -87,7 +89,10 @@ def _check_grid(
     :return: ``tiles_per_dim``, ``low`` and ``high`` with one entry per dimension
     """
     check_positive_int("n_tilings", n_tilings, "Sutton & Barto §9.5.4 advise a power of 2 at least 4 × n_dims, e.g. 8")
-    tiles = [tiles_per_dim] * n_dims if isinstance(tiles_per_dim, int) else list(tiles_per_dim)
+    if isinstance(tiles_per_dim, int | np.integer):
+        tiles = [tiles_per_dim] * n_dims
+    else:
+        tiles = list(tiles_per_dim) if isinstance(tiles_per_dim, Sequence | np.ndarray) else []
     if len(tiles) != n_dims or any(isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1 for n in tiles):
         raise ValueError(
             f"tiles_per_dim={tiles_per_dim!r} must be an integer >= 1 or a sequence of {n_dims} of them "
@@ -101,6 +106,14 @@ def _check_grid(
         if hash_size > HASH_MODULUS:
             raise ValueError(f"hash_size={hash_size} must be <= {HASH_MODULUS} (2^31 − 1, the modulus of the hash)")
     check_choice("origin", origin, ORIGINS)
+    dense_size = n_tilings * math.prod(int(n) + 1 for n in tiles)
+    if hash_size is None and dense_size > MAX_DENSE_FEATURES:
+        raise ValueError(
+            f"n_tilings={n_tilings} tilings of Π(tiles_per_dim + 1) tiles over {n_dims} dimensions are {dense_size:.3g} "
+            f"dense features, more than {MAX_DENSE_FEATURES:,} (a float32 row of them would take "
+            f"{dense_size * 4 / 2**30:.3g} GiB, as would each action's weights): pass hash_size (e.g. 4096, as the "
+            "book's IHT for Mountain Car) to hash the tiles to that many features, or fewer tiles_per_dim"
+        )
     return tuple(int(n) for n in tiles), lows, highs
 
 

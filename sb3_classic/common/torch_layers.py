@@ -108,7 +108,7 @@ def kaiming_init(
 
 def check_weight_init(weight_init: str | float) -> None:
     """:param weight_init: one of ``WEIGHT_INITS``, or a finite number (every weight starts at that constant)"""
-    if isinstance(weight_init, (int, float)) and not isinstance(weight_init, bool):
+    if isinstance(weight_init, numbers.Real) and not isinstance(weight_init, bool):
         if not math.isfinite(weight_init):
             raise ValueError(f"weight_init={weight_init!r} must be finite (0.0 is the book's start for linear methods)")
         return
@@ -118,6 +118,37 @@ def check_weight_init(weight_init: str | float) -> None:
         WEIGHT_INITS,
         hint="'kaiming' is He initialisation; a number (e.g. 0.0, the book's start for linear methods) sets all weights to it",
     )
+
+
+def check_constant_init_is_linear(
+    weight_init: str | float, modules: Iterable[nn.Module], outputs: Iterable[nn.Module]
+) -> None:
+    """
+    A constant ``weight_init`` is for linear models: in a network with hidden layers every hidden unit would start
+    with the same weights, get the same gradient and stay identical to the others (only the output biases learn).
+
+    :param weight_init: the policy's ``weight_init``
+    :param modules: the networks ``constant_init`` would set
+    :param outputs: their output layers, the only layers a linear model has
+    :raises ValueError: if ``weight_init`` is a number and ``modules`` hold a linear or convolutional layer that is not
+        one of ``outputs``
+    """
+    if isinstance(weight_init, str):
+        return
+    output_ids = {id(layer) for layer in outputs}
+    hidden = [
+        layer
+        for module in modules
+        for layer in module.modules()
+        if isinstance(layer, (nn.Linear, nn.Conv2d)) and id(layer) not in output_ids
+    ]
+    if hidden:
+        raise ValueError(
+            f"weight_init={weight_init!r} sets every weight to one number, which is for a linear model (net_arch=[] "
+            f"over features such as TileCoding's, the book's linear methods): this network has {len(hidden)} hidden "
+            "layer(s), whose units would all start and stay identical, so it could not learn. Pass net_arch=[] for "
+            "a linear model, or weight_init='kaiming', 'orthogonal' or 'default' for this network"
+        )
 
 
 def constant_init(modules: Iterable[nn.Module], value: float) -> None:

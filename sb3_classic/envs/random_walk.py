@@ -44,14 +44,14 @@ class RandomWalkEnv(Env[np.ndarray, np.int64]):
     metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012 (gymnasium's class attribute)
 
     def __init__(self, n_states: int = 19, render_mode: str | None = None) -> None:
-        if isinstance(n_states, bool) or not isinstance(n_states, int) or n_states < 1 or n_states % 2 == 0:
+        if isinstance(n_states, bool) or not isinstance(n_states, int | np.integer) or n_states < 1 or n_states % 2 == 0:
             raise ValueError(f"n_states={n_states!r} must be an odd integer >= 1 (19 in Example 7.1), so that it has a middle")
         if render_mode is not None:
             # A TypeError, as for an argument the env does not take: SB3's maybe_make_env asks for "rgb_array" and
             # falls back to gym.make(env_id) on it, so that NStepSARSA("MlpPolicy", env_id) works
             raise TypeError(f"render_mode={render_mode!r}: RandomWalkEnv has no rendering, pass None")
-        self.n_states = n_states
-        self.start_state = (n_states + 1) // 2
+        self.n_states = int(n_states)
+        self.start_state = (self.n_states + 1) // 2
         self.observation_space = spaces.Box(0.0, 1.0, shape=(n_states,), dtype=np.float32)
         self.action_space = spaces.Discrete(1)
         self.state = self.start_state

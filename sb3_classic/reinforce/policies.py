@@ -12,6 +12,7 @@ from torch import nn
 
 from sb3_classic.common.policies import EnvActionsMixin
 from sb3_classic.common.torch_layers import (
+    check_constant_init_is_linear,
     check_net_arch,
     check_weight_init,
     constant_init,
@@ -112,6 +113,7 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
                 self.vf_features_extractor = self.pi_features_extractor
         if not with_bias:
             remove_biases(self)
+        check_constant_init_is_linear(weight_init, [self], [self.action_net, self.value_net])
         if not isinstance(weight_init, str):
             constant_init([self], weight_init)
         elif weight_init == "kaiming":

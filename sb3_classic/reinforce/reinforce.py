@@ -179,6 +179,7 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         check_range("ent_coef", self.ent_coef, 0.0, float("inf"), hint="0.0 disables the entropy bonus")
 
     def _make_policy(self) -> BasePolicy:
+        self._refuse_policy_kwargs_set_here(use_baseline="use_baseline", value_lr_schedule="value_learning_rate")
         self.value_lr_schedule = FloatSchedule(self.value_learning_rate)
         return self.policy_class(
             self.observation_space,

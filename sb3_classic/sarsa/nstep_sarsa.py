@@ -265,6 +265,13 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
                 "decay ε linearly over that fraction of training, or drop exploration_fraction"
             )
         check_range("exploration_decay_rate", self.exploration_decay_rate, 0.0, 1.0, low_open=True)
+        if self.exploration_schedule == "exponential" and self.exploration_initial_eps < self.exploration_final_eps:
+            raise ValueError(
+                f"exploration_initial_eps={self.exploration_initial_eps!r} is below exploration_final_eps="
+                f"{self.exploration_final_eps!r}: the exponential schedule (ε ← max(ε_final, ε · exploration_decay_rate)) "
+                f"would run at ε = {self.exploration_final_eps!r} from the start. For a constant ε (the book's ε = 0), "
+                "set both to it; for an ε that grows, exploration_schedule='linear'"
+            )
         check_choice("loss_function", self.loss_function, ("mse", "huber"))
         check_range("td_lambda", self.td_lambda, 0.0, 1.0, hint="1.0 is the n-step return G_{t:t+n} (S&B §10.2)")
         if self.target_update_interval is not None:
@@ -307,6 +314,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self._update_exploration_rate()
 
     def _make_policy(self) -> BasePolicy:
+        self._refuse_policy_kwargs_set_here(target_network="target_update_interval", averaged_network="averaging_tau")
         target_network = self.target_update_interval is not None
         return self.policy_class(
             self.observation_space,
@@ -635,6 +643,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         # The rows of the batch are time-major: step t of every env, then step t+1
         chunks = self._update_slices(len(batch.targets))
         q_first: list[th.Tensor] = []  # q̂(S_t, A_t) before the update's first pass, for the log
+        losses: list[th.Tensor] = []  # every gradient step's, for the log's mean (SB3's DQN logs the mean)
         for gradient_step in range(self.gradient_steps):
             for chunk in chunks:
                 if len(chunks) == 1:
@@ -643,6 +652,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
                 else:
                     observations = select(batch.observations, chunk)  # type: ignore[arg-type]
                     q_predicted, loss = self._gradient_step(observations, batch.actions[chunk], batch.targets[chunk])  # type: ignore[arg-type]
+                losses.append(loss)
                 if gradient_step == 0:
                     q_first.append(q_predicted)
 
@@ -654,7 +664,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             self._target_updated_at = self.num_timesteps
         self._update_average()
         self._n_updates += self.gradient_steps * len(chunks)
-        self._record_update(loss, q_first[0] if len(q_first) == 1 else th.cat(q_first), batch.targets)
+        mean_loss = losses[0] if len(losses) == 1 else th.stack(losses).mean()
+        self._record_update(mean_loss, q_first[0] if len(q_first) == 1 else th.cat(q_first), batch.targets)
 
     def _update_average(self) -> None:
         """After an update: w̄ ← τw + (1 − τ)w̄ of the greedy policy's average (``averaging_tau``), if there is one."""
@@ -667,7 +678,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         """
         Log an update.
 
-        :param loss: the loss of its last gradient step
+        :param loss: the mean loss of its gradient steps (each step's loss before its parameter change), as SB3's DQN
+            logs it
         :param q_predicted: q̂(S_t, A_t) of its transitions before its first gradient step
         :param targets: their targets G_{t:t+n}
         """

@@ -20,6 +20,7 @@ from torch import nn
 
 from sb3_classic.common.policies import MODE_DEPENDENT_MODULES, EnvActionsMixin
 from sb3_classic.common.torch_layers import (
+    check_constant_init_is_linear,
     check_net_arch,
     check_weight_init,
     constant_init,
@@ -135,6 +136,7 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             self.q_net.q_net = nn.Sequential(*mlp)
         layers = list(self.q_net.q_net)
         hidden, output = [features_extractor, *layers[:-1]], layers[-1]
+        check_constant_init_is_linear(weight_init, [self.q_net], [output])
         if not isinstance(weight_init, str):
             constant_init([self.q_net], weight_init)
         elif weight_init == "kaiming":
