@@ -648,6 +648,21 @@ REFUSED_INPUTS = [
     (NStepSARSA, dict(policy_kwargs=dict(target_network=True)), TypeError, "pass target_update_interval=... to NStepSARSA"),
     (REINFORCE, dict(policy_kwargs=dict(use_baseline=False)), TypeError, "pass use_baseline=... to REINFORCE"),
     (REINFORCE, dict(max_grad_norm="0.5"), TypeError, "max_grad_norm='0.5' must be a number > 0"),
+    # A switch that would do nothing: no hidden layer to normalise
+    (NStepSARSA, dict(policy_kwargs=dict(net_arch=[], layer_norm=True)), ValueError, "net_arch=[] has none"),
+    # Keyword arguments of the features extractor or the activation: the hint named the policy's arguments
+    (
+        NStepSARSA,
+        dict(policy_kwargs=dict(features_extractor_kwargs=dict(n_tilings=8))),
+        TypeError,
+        "features_extractor_kwargs go to features_extractor_class (FlattenExtractor here, the default)",
+    ),
+    (
+        REINFORCE,
+        dict(policy_kwargs=dict(activation_fn=th.nn.LeakyReLU, activation_kwargs=dict(slope=0.1))),
+        TypeError,
+        "activation_kwargs go to activation_fn=LeakyReLU",
+    ),
 ]
 
 

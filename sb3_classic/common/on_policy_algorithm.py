@@ -3,6 +3,7 @@
 import inspect
 import math
 import numbers
+import re
 import warnings
 from abc import abstractmethod
 from collections.abc import Sequence
@@ -219,7 +220,7 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         except TypeError as error:
             if "unexpected keyword argument" not in str(error):
                 raise
-            raise TypeError(f"policy_kwargs: {error}. {self._policy_kwargs_hint()}") from error
+            raise TypeError(f"policy_kwargs: {error}. {self._policy_kwargs_hint(str(error))}") from error
         self.policy = policy.to(self.device)
 
     def _refuse_policy_kwargs_set_here(self, **arguments: str) -> None:
@@ -252,8 +253,25 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
             "saved by another algorithm; load it with that algorithm's class (e.g. REINFORCE.load or NStepSARSA.load)"
         )
 
-    def _policy_kwargs_hint(self) -> str:
-        """:return: what ``policy_kwargs`` takes, for the error of an unknown key"""
+    def _policy_kwargs_hint(self, error: str) -> str:
+        """
+        :param error: the error of an unknown keyword argument (``X.__init__() got an unexpected keyword argument``)
+        :return: what takes it: the features extractor's or the activation's kwargs if ``X`` is one of them, else
+            what ``policy_kwargs`` takes
+        """
+        failed = re.match(r"(\w+)\.__init__\(\)", error)
+        extractor = self.policy_kwargs.get("features_extractor_class")
+        activation = self.policy_kwargs.get("activation_fn")
+        if failed and failed.group(1) != self.policy_class.__name__:
+            name = failed.group(1)
+            if "features_extractor_kwargs" in self.policy_kwargs and (extractor is None or extractor.__name__ == name):
+                return (
+                    f"features_extractor_kwargs go to features_extractor_class ({name} here"
+                    f"{', the default' if extractor is None else ''}): pass the class they belong to, e.g. "
+                    "features_extractor_class=TileCoding for n_tilings and tiles_per_dim, or drop them"
+                )
+            if "activation_kwargs" in self.policy_kwargs and activation is not None and activation.__name__ == name:
+                return f"activation_kwargs go to activation_fn={name}: give that class's own arguments"
         parameters = [name for name in inspect.signature(self.policy_class).parameters if name not in _POLICY_ARGUMENTS]
         return (
             f"{type(self).__name__}'s policy takes {', '.join(parameters)} "

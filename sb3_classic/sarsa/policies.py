@@ -104,6 +104,11 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         check_bool("normalize_images", normalize_images)
         if net_arch is None:
             net_arch = [] if features_extractor_class == NatureCNN else [64, 64]
+        if layer_norm and not net_arch:
+            raise ValueError(
+                f"layer_norm=True normalises q̂'s hidden layers, and net_arch={list(net_arch)} has none (q̂ is linear in "
+                "the features): give hidden layers (e.g. net_arch=[64, 64]) or drop layer_norm"
+            )
         self.net_arch = net_arch
         self.activation_fn = activation_fn
         self.activation_kwargs = activation_kwargs
