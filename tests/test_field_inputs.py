@@ -31,7 +31,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from test_contract import make_model, parameters_equal
 from test_zoo import run
 
-from sb3_classic import REINFORCE, NStepSARSA
+from sb3_classic import REINFORCE, NStepSARSA, TileCoding
 from sb3_classic.common.buffers import all_finite
 
 MODEL_LIST = [REINFORCE, NStepSARSA]
@@ -655,7 +655,13 @@ REFUSED_INPUTS = [
         NStepSARSA,
         dict(policy_kwargs=dict(features_extractor_kwargs=dict(n_tilings=8))),
         TypeError,
-        "features_extractor_kwargs go to features_extractor_class (FlattenExtractor here, the default)",
+        "features_extractor_kwargs go to features_extractor_class, here the default FlattenExtractor",
+    ),
+    (
+        NStepSARSA,
+        dict(policy_kwargs=dict(features_extractor_class=TileCoding, features_extractor_kwargs=dict(tilings=8))),
+        TypeError,
+        "features_extractor_kwargs go to features_extractor_class=TileCoding: give that class's own arguments",
     ),
     (
         REINFORCE,
