@@ -8,6 +8,7 @@ import copy
 import glob
 import math
 import re
+import warnings
 from pathlib import Path
 from typing import Any, SupportsFloat
 
@@ -695,6 +696,47 @@ def test_inputs_that_would_be_taken_silently_are_refused(
 )
 def test_their_valid_neighbours_are_accepted(model_class: type[BaseAlgorithm], kwargs: dict[str, Any]) -> None:
     make_model(model_class, **kwargs).learn(32)
+
+
+class StopAt(BaseCallback):
+    """Stops ``learn()`` after ``steps`` env steps (a callback returning False, as a user's early stop does)."""
+
+    def __init__(self, steps: int) -> None:
+        super().__init__()
+        self.steps = steps
+
+    def _on_step(self) -> bool:
+        return self.num_timesteps < self.steps
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_a_model_loaded_mid_episode_without_reset_starts_new_episodes(
+    tmp_path: Path, model_class: type[BaseAlgorithm]
+) -> None:
+    # The file holds the envs' last observations but not the buffer: REINFORCE trained the rest of the episode as a
+    # whole one from t = 0 (γ^t, its length), with its first steps gone
+    env = make_vec_env("CartPole-v1", n_envs=1, seed=1)
+    model = make_model(model_class, env, seed=1)
+    model.learn(100, callback=StopAt(100))
+    assert not model._last_episode_starts[0], "the test needs an episode in progress"
+    model.save(tmp_path / "model.zip")
+    saved_steps = model.num_timesteps
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # without a file the buffer holds the episode: it goes on
+        model.learn(10, reset_num_timesteps=False)
+    loaded: Any = model_class.load(tmp_path / "model.zip", env=env, force_reset=False, device="cpu")
+    resets: list[int] = []
+    reset = loaded.env.reset
+
+    def counted_reset() -> Any:
+        resets.append(1)
+        return reset()
+
+    loaded.env.reset = counted_reset
+    with pytest.warns(UserWarning, match="not in its file"):
+        loaded.learn(1, reset_num_timesteps=False)
+    assert resets == [1]  # new episodes from their first step
+    assert loaded.num_timesteps > saved_steps  # the counts go on
 
 
 @pytest.mark.parametrize(("model_class", "policy"), [(REINFORCE, ActorCriticPolicy), (NStepSARSA, DQNPolicy)])

@@ -561,6 +561,17 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         tb_log_name: str = "run",
         progress_bar: bool = False,
     ) -> tuple[int, BaseCallback]:
+        if not reset_num_timesteps and self._last_obs is not None and self._episodes_missing_their_start():
+            # A model loaded with force_reset=False: the file has the envs' last observations but not the buffer, so
+            # the episodes in progress would be trained from where the file left them as if they began there (the
+            # wrong t in γ^t and in episode lengths, REINFORCE's returns of a part of an episode)
+            warnings.warn(
+                "The episodes in progress when this model was saved are not in its file (the buffer is not saved): "
+                f"{type(self).__name__} resets the envs to train on whole episodes. (load(..., force_reset=False) "
+                "cannot continue an episode here; the learned parameters and counts are kept)",
+                stacklevel=3,
+            )
+            self._last_obs = None
         if reset_num_timesteps or self._last_obs is None:
             # The envs are about to be reset: the episodes in progress in the buffer cannot be continued
             self.rollout_buffer.reset()
@@ -573,6 +584,13 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
         self._on_learn_start()
         return total_timesteps, callback
+
+    def _episodes_missing_their_start(self) -> bool:
+        """:return: whether an env is in the middle of an episode whose earlier steps the buffer does not hold"""
+        starts = self._last_episode_starts
+        if starts is None:
+            return True
+        return bool(np.any(~np.asarray(starts, dtype=bool) & (self.rollout_buffer.episode_length == 0)))
 
     def _on_learn_start(self) -> None:
         """Called by ``learn()`` once set up (``num_timesteps`` reset or not, the progress of this call at its start)."""
