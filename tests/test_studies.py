@@ -483,6 +483,15 @@ def test_reduced_run_counts_are_usage_errors(
     assert message in capsys.readouterr().err
 
 
+def test_variants_that_are_the_same_run_are_refused(tmp_path: Path) -> None:
+    # They were run (twice), compared, and a claim between them decided on noise ("too close to call" on +0.0)
+    text = TINY.replace("  n3: {n_steps: 3,", "  again: {n_steps: 1, learning_rate: 0.001}\n  n3: {n_steps: 3,")
+    with pytest.raises(StudyError, match=r"variants.again: the same run as variant 'n1'"):
+        load_study(write_study(tmp_path, text))
+    # A variant that differs in one setting is another run
+    load_study(write_study(tmp_path, text.replace("learning_rate: 0.001}", "learning_rate: 0.002}"), "other.yml"))
+
+
 def test_a_step_budget_is_refused_where_a_claim_counts_episodes(tmp_path: Path) -> None:
     # The file's own check ("episodes_to_threshold needs a budget in episodes") was bypassed by --steps
     text = TINY.replace("others: [n1]}", "others: [n1], metric: episodes_to_threshold}")

@@ -430,7 +430,7 @@ def load_study(path: Path | str) -> StudySpec:
     assert budget is not None, "checked"
     assert window is not None, "checked"
     assert smooth is not None, "checked"
-    return StudySpec(
+    study = StudySpec(
         name=str(data.get("study", path.stem)),
         title=str(data.get("title", path.stem)),
         source=str(data.get("source", "")),
@@ -448,6 +448,27 @@ def load_study(path: Path | str) -> StudySpec:
         notes=str(data.get("notes", "")).strip(),
         path=path,
     )
+    _check_distinct_variants(check, study)
+    return study
+
+
+def _check_distinct_variants(check: _Checker, study: StudySpec) -> None:
+    """
+    Refuse variants that are the same run as the file states them (e.g. ``same: {learning_rate: 0.003}`` beside
+    a base of 0.003): each would be compared with the other as if they differed, and a claim between them decided on
+    noise. (A variant that writes out a default value is a different entry, so not caught: its runs are other runs.)
+    """
+    seen: dict[str, str] = {}
+    for name in study.variants:
+        entry = yaml.safe_dump(study.zoo_entry(name), sort_keys=True)
+        if entry in seen:
+            check.fail(
+                f"variants.{name}",
+                f"the same run as variant {seen[entry]!r} (the same settings once merged with hyperparams): change "
+                "one, or drop it",
+            )
+        seen.setdefault(entry, name)
+    check.raise_if_any()
 
 
 def _env_and_algo(check: _Checker, data: Mapping[str, Any]) -> tuple[str, Any, str]:
