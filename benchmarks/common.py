@@ -5,7 +5,6 @@ and is re-exported here, so that ``from benchmarks.common import RunSpec`` keeps
 
 import argparse
 import contextlib
-import difflib
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -19,13 +18,12 @@ from sb3_classic.harness.common import (
     PEER_ALGOS,
     THRESHOLDS,
     ZOO_HYPERPARAMS_DIR,
-    ZOO_KEYS,
     RunSpec,
-    algorithm_arguments,
     code_versions,
     hyperparams_path,
     load_hyperparams,
     register_algorithms,
+    unknown_setting,
 )
 
 __all__ = [
@@ -80,13 +78,9 @@ def parse_overrides(values: Sequence[str], algos: Sequence[str]) -> dict[str, di
             raise ValueError(f"--set {value!r}: {algo!r} is not one of the algorithms benchmarked ({', '.join(algos)})")
         if key == "n_timesteps":
             raise ValueError(f"--set {value!r}: the env steps per run are the command's --budget (or --steps)")
-        known = algorithm_arguments(algo) | ZOO_KEYS
-        if key not in known:
-            close = difflib.get_close_matches(key, sorted(known), n=1)
-            hint = (
-                f"did you mean {close[0]!r}?" if close else f"the arguments of {LABELS[algo]} and the zoo's {sorted(ZOO_KEYS)}"
-            )
-            raise ValueError(f"--set {value!r}: {algo} has no setting {key!r}: {hint}")
+        unknown = unknown_setting(algo, key)
+        if unknown is not None:
+            raise ValueError(f"--set {value!r}: {unknown}")
         parsed = yaml.safe_load(text)
         if isinstance(parsed, str):
             # YAML 1.1 reads 5e-4 (no dot) as a string, which the zoo would then take for a schedule name

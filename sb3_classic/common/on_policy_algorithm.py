@@ -264,12 +264,13 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         activation = self.policy_kwargs.get("activation_fn")
         if failed and failed.group(1) != self.policy_class.__name__:
             name = failed.group(1)
-            if "features_extractor_kwargs" in self.policy_kwargs and extractor is None:
-                return (
-                    f"features_extractor_kwargs go to features_extractor_class, here the default {name}: pass the class "
-                    "they belong to (e.g. features_extractor_class=TileCoding for n_tilings and tiles_per_dim), or drop them"
-                )
-            if "features_extractor_kwargs" in self.policy_kwargs and getattr(extractor, "__name__", None) == name:
+            if "features_extractor_kwargs" in self.policy_kwargs and getattr(extractor, "__name__", name) == name:
+                if extractor is None:
+                    return (
+                        f"features_extractor_kwargs go to features_extractor_class, here the default {name}: pass the "
+                        "class they belong to (e.g. features_extractor_class=TileCoding for n_tilings and "
+                        "tiles_per_dim), or drop them"
+                    )
                 return f"features_extractor_kwargs go to features_extractor_class={name}: give that class's own arguments"
             if "activation_kwargs" in self.policy_kwargs and activation is not None and activation.__name__ == name:
                 return f"activation_kwargs go to activation_fn={name}: give that class's own arguments"

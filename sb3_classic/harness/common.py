@@ -4,6 +4,7 @@ the others), the versions a result depends on, and the cache key of a run.
 """
 
 import argparse
+import difflib
 import hashlib
 import inspect
 import json
@@ -53,6 +54,21 @@ def algorithm_arguments(algo: str) -> set[str]:
     """:return: the constructor arguments of ``rl_zoo3.ALGOS[algo]``"""
     register_algorithms()
     return set(inspect.signature(rl_zoo3.ALGOS[algo].__init__).parameters) - {"self", "env", "_init_setup_model"}
+
+
+def unknown_setting(algo: str, key: str) -> str | None:
+    """
+    :param algo: a key of ``rl_zoo3.ALGOS``
+    :param key: a key of a zoo YAML entry for it
+    :return: None if ``key`` is a constructor argument of ``algo`` or a key the zoo reads itself (``ZOO_KEYS``), else
+        the error: ``algo`` has no such argument, with the closest one ("did you mean")
+    """
+    known = algorithm_arguments(algo) | ZOO_KEYS
+    if key in known:
+        return None
+    close = difflib.get_close_matches(key, sorted(known), n=1)
+    hint = f"did you mean {close[0]!r}?" if close else f"see the arguments of {rl_zoo3.ALGOS[algo].__name__}"
+    return f"{algo} has no argument {key!r}: {hint}"
 
 
 def int_at_least(minimum: int) -> Callable[[str], int]:

@@ -119,8 +119,6 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
     parser.add_argument("--report-only", action="store_true", help="run nothing: outputs from the runs already cached")
     args = parser.parse_args(argv)
     console = Console()
-    if args.episodes is not None and args.steps is not None:
-        parser.error("--episodes and --steps: give one budget")
 
     reduced = args.seeds is not None or args.episodes is not None or args.steps is not None
     try:

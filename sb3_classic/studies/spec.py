@@ -41,7 +41,7 @@ import gymnasium
 import rl_zoo3
 import yaml
 
-from sb3_classic.harness.common import THRESHOLDS, ZOO_KEYS, RunSpec, algorithm_arguments, register_algorithms
+from sb3_classic.harness.common import THRESHOLDS, RunSpec, register_algorithms, unknown_setting
 
 METRICS = ("mean_return", "last_100_return", "episodes_to_threshold")
 CLAIM_KINDS = ("better", "similar", "reaches", "below")
@@ -330,17 +330,15 @@ class _Checker:
             return None
         return value
 
-    def hyperparams(self, where: str, entry: Any, arguments: set[str], algo: str) -> dict[str, Any]:
+    def hyperparams(self, where: str, entry: Any, algo: str) -> dict[str, Any]:
         if not isinstance(entry, Mapping):
             self.fail(where, f"expected a mapping of hyperparameters (a zoo YAML entry), got {entry!r}")
             return {}
         for key, value in entry.items():
             if key == "n_timesteps":
                 self.fail(f"{where}.n_timesteps", "the budget is the study's `budget:` (episodes or steps): remove it")
-            elif key not in arguments and key not in ZOO_KEYS:
-                close = difflib.get_close_matches(str(key), sorted(arguments | ZOO_KEYS), n=1)
-                hint = f"did you mean {close[0]!r}?" if close else f"see the arguments of {rl_zoo3.ALGOS[algo].__name__}"
-                self.fail(f"{where}.{key}", f"{algo} has no argument {key!r}: {hint}")
+            elif (unknown := unknown_setting(algo, str(key))) is not None:
+                self.fail(f"{where}.{key}", unknown)
             self.float_strings(f"{where}.{key}", value)
             if key == "policy_kwargs" and not isinstance(value, str | Mapping):
                 self.fail(
@@ -392,16 +390,15 @@ def load_study(path: Path | str) -> StudySpec:
     check.raise_if_any()
 
     env_id, env_spec, algo = _env_and_algo(check, data)
-    arguments = algorithm_arguments(algo)
 
     seeds = _seeds(check, data.get("seeds", 10))
     budget = _budget(check, data["budget"])
     uncapped = budget is not None and budget.episodes is not None and budget.max_steps is None
     if uncapped and env_spec is not None and env_spec.max_episode_steps is None:
         check.fail("budget.max_steps", f"{env_id} has no time limit: give a step cap, e.g. max_steps: 500000")
-    hyperparams = check.hyperparams("hyperparams", data["hyperparams"], arguments, algo)
-    variants = _variants(check, data, arguments, algo)
-    readings = _readings(check, data.get("readings") or {}, arguments, algo)
+    hyperparams = check.hyperparams("hyperparams", data["hyperparams"], algo)
+    variants = _variants(check, data, algo)
+    readings = _readings(check, data.get("readings") or {}, algo)
     for name, overrides in variants.items():
         if isinstance(overrides.get("policy_kwargs"), Mapping) and isinstance(hyperparams.get("policy_kwargs"), str):
             check.fail(
@@ -529,7 +526,7 @@ def _budget(check: _Checker, value: Any) -> Budget | None:
     return Budget(episodes=episodes, max_steps=max_steps) if episodes is not None else None
 
 
-def _variants(check: _Checker, data: Mapping[str, Any], arguments: set[str], algo: str) -> dict[str, dict[str, Any]]:
+def _variants(check: _Checker, data: Mapping[str, Any], algo: str) -> dict[str, dict[str, Any]]:
     if ("vary" in data) == ("variants" in data):
         check.fail(
             "variants", "give exactly one of `vary:` (one axis: {n_steps: [1, 5, 10]}) and `variants:` (named overrides)"
@@ -549,7 +546,7 @@ def _variants(check: _Checker, data: Mapping[str, Any], arguments: set[str], alg
             name = f"{key}={value}"
             if name in variants:
                 check.fail(f"vary.{key}", f"{value!r} appears twice")
-            variants[name] = check.hyperparams("vary", {key: value}, arguments, algo)
+            variants[name] = check.hyperparams("vary", {key: value}, algo)
         return variants
     raw = data["variants"]
     if not isinstance(raw, Mapping) or not raw:
@@ -557,18 +554,16 @@ def _variants(check: _Checker, data: Mapping[str, Any], arguments: set[str], alg
             "variants", f"{raw!r}: a mapping of names to overrides, e.g. {{he: {{policy_kwargs: {{weight_init: kaiming}}}}}}"
         )
         return {}
-    return {
-        str(name): check.hyperparams(f"variants.{name}", overrides or {}, arguments, algo) for name, overrides in raw.items()
-    }
+    return {str(name): check.hyperparams(f"variants.{name}", overrides or {}, algo) for name, overrides in raw.items()}
 
 
-def _readings(check: _Checker, raw: Any, arguments: set[str], algo: str) -> dict[str, dict[str, Any]]:
+def _readings(check: _Checker, raw: Any, algo: str) -> dict[str, dict[str, Any]]:
     readings: dict[str, dict[str, Any]] = {STATED: {}}
     if not isinstance(raw, Mapping):
         check.fail("readings", "expected a mapping: name → overrides, e.g. {steplr_factor_0.5: {lr_decay_factor: 0.5}}")
         return readings
     for name, overrides in raw.items():
-        readings[str(name)] = check.hyperparams(f"readings.{name}", overrides, arguments, algo)
+        readings[str(name)] = check.hyperparams(f"readings.{name}", overrides, algo)
     return readings
 
 
