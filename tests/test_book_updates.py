@@ -371,8 +371,15 @@ def test_plain_reinforce_saves_and_loads(tmp_path: Any) -> None:
     assert loaded.policy.value_optimizer is None
     obs = np.zeros((5, 4), dtype=np.float32)
     np.testing.assert_array_equal(loaded.predict(obs, deterministic=True)[0], model.predict(obs, deterministic=True)[0])
-    with pytest.raises(ValueError, match="use_baseline=False"):
-        loaded.policy.predict_values(th.zeros(1, 4))
+    # Every method that returns v̂ says there is none (forward and evaluate_actions returned the features unchanged)
+    for returns_values in (
+        lambda: loaded.policy.predict_values(th.zeros(1, 4)),
+        lambda: loaded.policy(th.zeros(1, 4)),
+        lambda: loaded.policy.evaluate_actions(th.zeros(1, 4), th.zeros(1)),
+    ):
+        with pytest.raises(ValueError, match=r"use_baseline=False.*get_distribution"):
+            returns_values()
+    assert loaded.policy.get_distribution(th.zeros(1, 4)).log_prob(th.zeros(1)).shape == (1,)
     loaded.learn(200)
 
 

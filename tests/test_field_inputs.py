@@ -184,6 +184,43 @@ def test_box_actions_are_unchanged() -> None:
     np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], model.policy.predict(obs, deterministic=True)[0])
 
 
+@pytest.mark.parametrize("update_mode", ["batch", "per_step"])
+@pytest.mark.parametrize("n_envs", [1, 2])
+@pytest.mark.parametrize("shape", [(1, 1), (2, 3)])
+def test_box_actions_of_several_dimensions_keep_their_shape(shape: tuple[int, ...], n_envs: int, update_mode: str) -> None:
+    """
+    A Box of shape (2, 3) (or (1, 1)) gets actions of that shape from the rollout loop and ``predict``, as from A2C.
+    SB3's Gaussian draws them flat, (n_envs, 6): the env was sent (n_envs, 6) (or (1,) for (1, 1)), and with 2 envs
+    the buffer refused them; training's log-probabilities are of the flat actions the env received.
+    """
+    space = spaces.Box(-100.0, 100.0, shape=shape, dtype=np.float32)  # wide: the unit Gaussian's draws are not clipped
+    envs = [ActionRecordingEnv(space) for _ in range(n_envs)]
+    vec_env = DummyVecEnv([lambda env=env: Monitor(env) for env in envs])  # type: ignore[misc]
+    model = make_model(REINFORCE, vec_env, seed=0, update_mode=update_mode)
+    batches = []
+    training_batch = model._training_batch
+
+    def recorded() -> Any:
+        batch = training_batch()
+        batches.append(batch)
+        return batch
+
+    model._training_batch = recorded
+    model.learn(60)
+    assert all(np.shape(action) == shape for env in envs for action in env.received)
+    first = batches[0]
+    assert first is not None
+    # One env: the batch is its first episode(s), in the order the env received them, flattened as SB3's buffer does
+    if n_envs == 1:
+        received = np.array(envs[0].received[: len(first.actions)], dtype=np.float32).reshape(len(first.actions), -1)
+        np.testing.assert_array_equal(first.actions.numpy(), received)
+    log_prob = model.policy.get_distribution(first.observations).log_prob(first.actions)
+    assert log_prob.shape == (len(first.targets),)
+    observations = np.stack([envs[0].observation_space.sample() for _ in range(4)])
+    assert model.predict(observations, deterministic=True)[0].shape == (4, *shape)
+    assert model.predict(observations[0])[0].shape == shape
+
+
 OFFSET_ENV_MODULE = """
 import gymnasium as gym
 import numpy as np

@@ -186,7 +186,7 @@ class TrajectoryBuffer(BaseBuffer):
 
     def truncate(self, env_indices: np.ndarray, final_observations: Observations) -> None:
         """
-        End the running episodes of ``env_indices`` at the last step added, as a time limit would
+        End the running episodes of ``env_indices`` at the last step added, for training, as a time limit would
         (the envs themselves go on: what follows counts as a new episode).
 
         :param env_indices: the envs whose episodes to cut

@@ -70,8 +70,10 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
     :param handle_timeout_termination: bootstrap from the value of the final state when an episode is cut by a time
         limit (``TimeLimit.truncated``), treating the limit as not part of the task (SB3's default); if False,
         a truncation ends the return like a termination
-    :param max_episode_length: cut any episode that reaches this many steps as a time limit would (with a warning),
-        so an env that never ends cannot grow the buffer without bound; ``None`` for no cap
+    :param max_episode_length: cut any episode that reaches this many steps for training (with a warning), so an env
+        that never ends cannot grow the buffer without bound: its return ends there, bootstrapped as at a time limit;
+        the env is not reset (a VecEnv resets an env only when it ends), so the next episode trained on starts from
+        the state reached, and the Monitor and callbacks do not count the cut; ``None`` for no cap
     :param stats_window_size: window size for the rollout logging, in episodes
     :param tensorboard_log: the log location for TensorBoard (if None, no logging)
     :param policy_kwargs: additional arguments to be passed to the policy on creation
@@ -392,8 +394,10 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
             if overlong.any():
                 warnings.warn(
                     f"Episodes of envs {np.flatnonzero(overlong).tolist()} reached max_episode_length="
-                    f"{self.max_episode_length} steps without ending: {type(self).__name__} cut them there as a time "
-                    "limit would. Wrap the env in gymnasium.wrappers.TimeLimit, or raise max_episode_length.",
+                    f"{self.max_episode_length} steps without ending: {type(self).__name__} cut them there for "
+                    "training (their returns end there, bootstrapped as at a time limit), but the envs go on: the next "
+                    "episodes trained on start where these stopped, and the Monitor and callbacks do not count the "
+                    "cuts. Wrap the env in gymnasium.wrappers.TimeLimit (which resets it), or raise max_episode_length.",
                     stacklevel=3,
                 )
                 ends = dones | overlong

@@ -134,14 +134,46 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         if use_baseline:
             self.value_optimizer = self.optimizer_class(value_parameters, lr=value_lr_schedule(1), **optimizer_kwargs)  # type: ignore[call-arg]
 
+    def _check_value_network(self, method: str) -> None:
+        """:raises ValueError: for plain REINFORCE (``use_baseline=False``), which has no v̂ for ``method`` to return"""
+        if not self.use_baseline:
+            raise ValueError(
+                f"This policy has no value network (use_baseline=False): v̂ is not defined, and {method} returns it. "
+                "For actions and their log-probabilities use policy.get_distribution(obs) (.get_actions(), "
+                ".log_prob(actions), .entropy()) or predict(obs)"
+            )
+
+    def forward(self, obs: th.Tensor, deterministic: bool = False) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
+        """
+        SB3's ``ActorCriticPolicy.forward``.
+
+        :param obs: observations
+        :param deterministic: whether to take the most likely actions
+        :return: actions, v̂(obs, w) of shape (batch, 1), and the actions' log-probabilities
+        :raises ValueError: for plain REINFORCE (``use_baseline=False``), which has no value network
+        """
+        self._check_value_network("policy(obs) (forward)")
+        return super().forward(obs, deterministic)
+
+    def evaluate_actions(self, obs: PyTorchObs, actions: th.Tensor) -> tuple[th.Tensor, th.Tensor, th.Tensor | None]:
+        """
+        SB3's ``ActorCriticPolicy.evaluate_actions``.
+
+        :param obs: observations
+        :param actions: actions, as SB3's distributions take them
+        :return: v̂(obs, w) of shape (batch, 1), the actions' log-probabilities and the entropy of the distribution
+        :raises ValueError: for plain REINFORCE (``use_baseline=False``), which has no value network
+        """
+        self._check_value_network("evaluate_actions")
+        return super().evaluate_actions(obs, actions)
+
     def predict_values(self, obs: PyTorchObs) -> th.Tensor:
         """
         :param obs: observations
         :return: v̂(obs, w), shape (batch, 1)
         :raises ValueError: for plain REINFORCE (``use_baseline=False``), which has no value network
         """
-        if not self.use_baseline:
-            raise ValueError("This policy has no value network (use_baseline=False): v̂ is not defined")
+        self._check_value_network("predict_values")
         return super().predict_values(obs)
 
     def sample_actions(self, obs: PyTorchObs) -> th.Tensor:

@@ -81,8 +81,10 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
     :param handle_timeout_termination: at a time-limit truncation, bootstrap the return from v̂ of the final state
         (the time limit is not part of the task: SB3's choice, and the default); if False, the return ends there
         as at a termination
-    :param max_episode_length: REINFORCE needs episodes that end: one that reaches this many steps is cut there as
-        a time limit would (with a warning), so a never-ending env cannot grow the buffer without bound
+    :param max_episode_length: REINFORCE needs episodes that end: one that reaches this many steps is cut there for
+        training (with a warning), so a never-ending env cannot grow the buffer without bound. Its return ends there,
+        bootstrapped as at a time limit, but the env is not reset: the next episode trained on starts from the state
+        reached, and the Monitor and callbacks do not count the cut (``gymnasium.wrappers.TimeLimit`` resets it)
     :param stats_window_size: window size for the rollout logging, in episodes
     :param tensorboard_log: the log location for TensorBoard (if None, no logging)
     :param policy_kwargs: additional arguments to be passed to the policy on creation (see ``REINFORCEPolicy``:
@@ -192,7 +194,12 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
 
     def _sample_actions(self, obs: th.Tensor | dict[str, th.Tensor]) -> np.ndarray:
         # A ~ π(·|S, θ); the baseline v̂ is only needed at update time
-        return self.policy.sample_actions(obs).cpu().numpy()
+        actions = self.policy.sample_actions(obs).cpu().numpy()
+        if isinstance(self.action_space, spaces.Box):
+            # SB3's Gaussian draws flat actions (n_envs, action_dim); the env and the buffer take the space's shape
+            # (as SB3's ActorCriticPolicy.forward reshapes them), e.g. (n_envs, 2, 3) for Box(shape=(2, 3))
+            actions = actions.reshape((-1, *self.action_space.shape))
+        return actions
 
     def _rollout_complete(self, n_steps: int, n_episodes: int) -> bool:
         return n_episodes >= self.n_episodes
@@ -218,11 +225,21 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         returns = discounted_returns(data.rewards, data.dones, next_values, self.gamma)
         return TrainingBatch(
             observations=obs_as_tensor(select(data.observations, trained), self.device),
-            actions=th.as_tensor(data.actions[trained], device=self.device),
+            actions=th.as_tensor(self._distribution_actions(data.actions[trained]), device=self.device),
             targets=th.as_tensor(returns[trained], device=self.device),
             episode_steps=th.as_tensor(data.episode_steps[trained], device=self.device),
             trained=trained,
         )
+
+    def _distribution_actions(self, actions: np.ndarray) -> np.ndarray:
+        """
+        :param actions: A_t as the buffer stores them, shape (B, *action_space.shape)
+        :return: the same, as SB3's distributions take them: Box actions flattened to (B, action_dim) (SB3's
+            ``RolloutBuffer`` stores them so), other spaces unchanged
+        """
+        if isinstance(self.action_space, spaces.Box):
+            return actions.reshape(len(actions), -1)
+        return actions
 
     def _gradient_step(
         self, observations: th.Tensor | dict[str, th.Tensor], actions: th.Tensor, returns: th.Tensor, episode_steps: th.Tensor
