@@ -11,7 +11,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from sb3_classic.harness.common import LABELS, THRESHOLDS, RunSpec
-from sb3_classic.harness.runner import EPISODES_FILE, EVALUATIONS_FILE, RUN_FILE, load_run
+from sb3_classic.harness.runner import EPISODES_FILE, EVALUATIONS_FILE, RUN_FILE, load_run, load_run_table
 
 RUN_COLUMNS = ["algo", "env_id", "seed"]
 #: What the tables use of each run's ``run.json``
@@ -51,8 +51,8 @@ def load_results(specs: Sequence[RunSpec], cache_dir: Path) -> Results:
         labels = {"algo": spec.algo, "env_id": spec.env_id, "seed": spec.seed}
         summary = load_run(run_dir)
         runs.append({**labels, **{key: summary[key] for key in SUMMARY_COLUMNS}})
-        episodes.append(pd.read_csv(run_dir / EPISODES_FILE).assign(**labels))
-        evaluations.append(pd.read_csv(run_dir / EVALUATIONS_FILE).assign(**labels))
+        episodes.append(load_run_table(run_dir, EPISODES_FILE).assign(**labels))
+        evaluations.append(load_run_table(run_dir, EVALUATIONS_FILE).assign(**labels))
     return Results(
         runs=pd.DataFrame(runs, columns=[*RUN_COLUMNS, *SUMMARY_COLUMNS]),
         episodes=pd.concat(episodes, ignore_index=True) if episodes else pd.DataFrame(columns=RUN_COLUMNS),

@@ -25,6 +25,7 @@ from typing import Any
 
 import yaml
 from rich.console import Console
+from rich.markup import escape
 
 from benchmarks.common import DEFAULT_CACHE_DIR, DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR, overrides_from_args
 from benchmarks.report import load_results, markdown_table, summary_table, threshold_crossings, write_learning_report
@@ -40,7 +41,7 @@ from sb3_classic.harness.common import (
     positive_int,
 )
 from sb3_classic.harness.pool import report_missing, run_missing_runs
-from sb3_classic.harness.runner import RUN_FILE
+from sb3_classic.harness.runner import RUN_FILE, DamagedRunError
 
 
 @dataclass
@@ -263,7 +264,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return status
     learning_time = time.perf_counter() - start
 
-    results = load_results(specs, args.cache_dir)
+    try:
+        results = load_results(specs, args.cache_dir)
+    except DamagedRunError as error:
+        console.print(f"[red]{escape(str(error))}[/red]", highlight=False, soft_wrap=True)
+        return 2
     if results.runs.empty:
         return report_missing(results.missing, console)
     header = learning_header(command, settings, args.envs, args.algos, args.workers, args.scheduler)

@@ -2,12 +2,14 @@
 seed report's study files, and a tiny study run end to end by the command."""
 
 import contextlib
+import dataclasses
 import hashlib
 import inspect
 import io
 import json
 import re
 import shlex
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -16,10 +18,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import pytest
+from rich.console import Console
 
 from benchmarks.common import REPO_ROOT
 from benchmarks.studies import SEED_REPORT_STUDIES
 from sb3_classic import REINFORCE, NStepSARSA
+from sb3_classic.harness import pool
 from sb3_classic.harness.common import RunSpec, code_versions
 from sb3_classic.harness.runner import execute_run
 from sb3_classic.studies import cli as studies_cli
@@ -119,6 +123,21 @@ def test_readings_reinterpret_only_the_settings_a_variant_has(tmp_path: Path) ->
         (("budget: {episodes: 6}", "budget: {episode: 6}"), ["budget: {'episode': 6} ('episode': did you mean 'episodes'?)"]),
         (("budget: {episodes: 6}", "budget: {episodes: 6, steps: 100}"), ["budget: give episodes or steps, not both"]),
         (("{text:", "{txt:"), ["claim.txt: unknown field: did you mean 'text'?", "claim.text: missing: the claim"]),
+        # Each was taken: outputs written outside the results folder (or as hidden files), a seed `True`, a margin of
+        # `true` (1), a threshold of .nan, a level of .inf, and the zoo's "multiple values for keyword argument 'seed'"
+        (("title: Tiny", "study: ../escaped/name\ntitle: Tiny"), ["study: '../escaped/name': the name of the study's output"]),
+        (("title: Tiny", "study: ''\ntitle: Tiny"), ["study: '': the name of the study's output files"]),
+        (("seeds: 2", "seeds: [0, true]"), ["seeds: [0, True]: give a number of seeds"]),
+        (("kind: better", "kind: similar, margin: true"), ["claim.margin: a 'similar' claim needs"]),
+        (
+            ("threshold_window: 3", "threshold_window: 3\nthreshold: .nan"),
+            ["threshold: nan: give the return", "a finite number"],
+        ),
+        (("kind: better", "kind: reaches, value: .inf"), ["claim.value: inf: the level to reach", "a finite number"]),
+        (("  policy: MlpPolicy", "  policy: MlpPolicy\n  seed: 3"), ["hyperparams.seed: each run's seed comes from"]),
+        # Variants named by numbers are strings to the loader; YAML reads a claim's 3 as an int
+        (("n1: {n_steps: 1}", "'1': {n_steps: 1}"), ["claim.others: 'n1' is not a variant"]),
+        (("others: [n1]", "others: [1]"), ["claim.others: 1 is not a variant"]),
     ],
 )
 def test_study_file_errors_name_the_field_and_the_fix(tmp_path: Path, change: tuple[str, str], expected: list[str]) -> None:
@@ -131,6 +150,15 @@ def test_study_file_errors_name_the_field_and_the_fix(tmp_path: Path, change: tu
     assert str(path) in message
     for part in expected:
         assert part in message
+
+
+def test_a_variant_named_by_a_number_is_quoted_in_the_hint(tmp_path: Path) -> None:
+    text = TINY.replace("n1: {n_steps: 1}", "'1': {n_steps: 1}").replace("others: [n1]", "others: [1]")
+    with pytest.raises(
+        StudyError,
+        match=re.escape("1 is not a variant: choose among '1', 'n3' (YAML reads 1 as a number, not a name: quote it, '1')"),
+    ):
+        load_study(write_study(tmp_path, text))
 
 
 def test_study_file_errors_are_all_listed_at_once(tmp_path: Path) -> None:
@@ -210,8 +238,14 @@ def test_vary_names_its_variants(tmp_path: Path) -> None:
 # ---- statistics -------------------------------------------------------------------------------------------------
 
 
-def metrics_of(values: list[float] | np.ndarray, metric: str = "mean_return") -> dict[str, np.ndarray]:
-    return {metric: np.asarray(values, dtype=float)}
+def metrics_of(
+    values: list[float] | np.ndarray, metric: str = "mean_return", reached: list[bool] | np.ndarray | None = None
+) -> dict[str, np.ndarray]:
+    """:param reached: per seed, whether it reached the threshold (episodes to threshold: every seed, if None)"""
+    metrics = {metric: np.asarray(values, dtype=float)}
+    if metric == "episodes_to_threshold":
+        metrics["reached"] = np.ones(len(values), dtype=bool) if reached is None else np.asarray(reached, dtype=bool)
+    return metrics
 
 
 def claim(kind: str = "better", **fields: object) -> Claim:
@@ -281,6 +315,41 @@ def test_verdicts_of_similar_reaches_and_below() -> None:
     )
     spread = metrics_of(300 + np.random.default_rng(0).normal(0, 16, 10))
     assert stats.judge(claim("below", value=100.0, statistic="std"), {"A": spread}).verdict == stats.SUPPORTED
+
+
+def test_censored_episodes_to_threshold_give_no_verdict_they_cannot_support() -> None:
+    """
+    A seed that never reaches the threshold counts as the budget (60 here), a lower bound. With no seed reaching it,
+    "below 100 episodes" was supported (60 < 100) and two variants were "alike" (+0.0 [+0.0, +0.0]).
+    """
+    budget = np.full(10, 60.0)
+    never = metrics_of(budget, "episodes_to_threshold", reached=np.zeros(10, dtype=bool))
+    below = claim("below", value=100.0, metric="episodes_to_threshold")
+    result = stats.judge(below, {"A": never})
+    assert result.verdict == stats.TOO_CLOSE
+    assert "never reached the threshold, counted as the budget: A 10/10" in result.measured
+    assert stats.judge(claim("similar", margin=5.0, metric="episodes_to_threshold"), {"A": never, "B": never}).verdict == (
+        stats.TOO_CLOSE
+    )
+    assert stats.judge(claim(metric="episodes_to_threshold"), {"A": never, "B": never}).verdict == stats.TOO_CLOSE
+    # Censoring only hides larger values: at or above a level stands ("reaches 50": every seed took at least 60)
+    assert stats.judge(claim("reaches", value=50.0, metric="episodes_to_threshold"), {"A": never}).verdict == stats.SUPPORTED
+    # Within the budget, one variant reaching it earlier stands (the restricted means: fig 27's 4/10 against 0/10)
+    rng = np.random.default_rng(0)
+    some = np.concatenate([20 + rng.normal(0, 2, 6), budget[:4]])
+    partly = metrics_of(some, "episodes_to_threshold", reached=[True] * 6 + [False] * 4)
+    faster = stats.judge(claim(metric="episodes_to_threshold"), {"A": partly, "B": never})
+    assert faster.verdict == stats.SUPPORTED
+    assert "A 4/10, B 10/10" in faster.measured
+    # ... but not shown below a level, nor alike, nor in its spread
+    assert stats.judge(below, {"A": partly}).verdict == stats.TOO_CLOSE
+    reached = metrics_of(some[:6].tolist() * 2, "episodes_to_threshold")
+    assert stats.judge(below, {"A": reached}).verdict == stats.SUPPORTED
+    similar = claim("similar", margin=50.0, metric="episodes_to_threshold")
+    assert stats.judge(similar, {"A": reached, "B": reached}).verdict == stats.SUPPORTED
+    assert stats.judge(similar, {"A": reached, "B": partly}).verdict == stats.TOO_CLOSE
+    spread = claim(metric="episodes_to_threshold", statistic="std")
+    assert stats.judge(spread, {"A": reached, "B": partly}).verdict == stats.TOO_CLOSE
 
 
 def test_a_budget_in_steps_gives_each_seed_its_own_episodes() -> None:
@@ -506,6 +575,88 @@ def test_a_step_budget_is_refused_where_a_claim_counts_episodes(tmp_path: Path) 
         status = studies_cli.main([str(tmp_path / "study.yml"), "--list", "--cache-dir", str(tmp_path), "--steps", "300"])
     assert status == 2
     assert "give --episodes" in " ".join(output.getvalue().split())
+
+
+def test_runs_shared_by_readings_or_studies_are_run_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # A variant under two readings, or two study files of the same run, trained it once per reference
+    shared = RunSpec("reinforce", "CartPole-v1", 0, 1000, 500, 2, "policy: MlpPolicy\n", label="a seed 0")
+    again = dataclasses.replace(shared, label="a [reading] seed 0")
+    other = dataclasses.replace(shared, seed=1, label="a seed 1")
+    ran: list[RunSpec] = []
+
+    def run_pending(specs: list[RunSpec], *args: object) -> list[RunSpec]:
+        ran.extend(specs)
+        return []
+
+    monkeypatch.setattr(pool, "run_pending", run_pending)
+    output = io.StringIO()
+    status = pool.run_missing_runs(3, [shared, again, other], 1, tmp_path, Console(file=output, width=200))
+    assert status is None
+    assert ran == [shared, other]
+    assert "3 runs: 0 cached, 2 to run on 1 workers (1 of them the same runs as others)" in output.getvalue()
+
+
+def fake_cache(tmp_path: Path) -> tuple[Path, Path, Path]:
+    """
+    :return: TINY's study file, a cache holding each of its runs (6 episodes of return 9 + seed + 10 × variant n3), and
+        a results folder
+    """
+    study_file = write_study(tmp_path, TINY)
+    cache = tmp_path / "cache"
+    for run in load_study(study_file).runs():
+        run_dir = run.spec.run_dir(cache)
+        run_dir.mkdir(parents=True)
+        (run_dir / "run.json").write_text(json.dumps({"learn_time_s": 1.0, "eval_time_s": 0.0}))
+        value = 9.0 + run.seed + 10 * (run.variant == "n3")
+        (run_dir / "episodes.csv").write_text("return\n" + "\n".join([str(value)] * 6) + "\n")
+    return study_file, cache, tmp_path / "results"
+
+
+def test_the_outputs_give_each_seed_and_say_when_runs_are_missing(tmp_path: Path) -> None:
+    study_file, cache, results = fake_cache(tmp_path)
+    command = [str(study_file), "--report-only", "--cache-dir", str(cache), "--results-dir", str(results)]
+    assert studies_cli.main(command) == 0
+    # The values the intervals are computed from, one row per run (the CSV had the means and intervals only)
+    seeds = pd.read_csv(results / "study-seeds.csv")
+    assert seeds[["variant", "seed"]].values.tolist() == [["n1", 0], ["n1", 1], ["n3", 0], ["n3", 1]]
+    assert seeds["mean_return"].tolist() == [9.0, 10.0, 19.0, 20.0]
+    assert "Partial" not in (results / "study.md").read_text()
+    # A run missing: its study's own page says the verdicts are partial (only STUDIES.md did)
+    shutil.rmtree(load_study(study_file).runs()[0].spec.run_dir(cache))
+    assert studies_cli.main(command) == 1
+    page = (results / "study.md").read_text()
+    assert "**Partial**: 1 of 4 runs are missing" in page
+    assert "(partial: 1 runs missing): n = 3 beats n = 1" in page
+    assert len(pd.read_csv(results / "study-seeds.csv")) == 3
+
+
+@pytest.mark.parametrize(
+    ("damage", "expected"),
+    [
+        # Each was a bare traceback that named no run (a JSONDecodeError, "a seed has only 3 episodes") or a file
+        (lambda run_dir: (run_dir / "run.json").write_text(""), "run.json: Expecting value"),
+        (
+            lambda run_dir: (run_dir / "episodes.csv").write_text("return\n1.0\n2.0\n3.0\n"),
+            "episodes.csv has 3 rows, fewer than the 6",
+        ),
+        (lambda run_dir: (run_dir / "episodes.csv").unlink(), "episodes.csv: [Errno 2]"),
+    ],
+)
+def test_a_damaged_cache_entry_names_its_folder(
+    tmp_path: Path, damage: Any, expected: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    study_file, cache, results = fake_cache(tmp_path)
+    runs = load_study(study_file).runs()
+    command = [str(study_file), "--report-only", "--cache-dir", str(cache), "--results-dir", str(results)]
+    assert studies_cli.main(command) == 0
+    damaged = runs[1].spec.run_dir(cache)
+    damage(damaged)
+    (results / "STUDIES.md").unlink()
+    assert studies_cli.main(command) == 2
+    output = " ".join(capsys.readouterr().out.split())
+    assert f"The cached run in {damaged} is damaged ({expected}" in output
+    assert "delete that folder and run the command again to rerun it" in output
+    assert not (results / "STUDIES.md").exists()
 
 
 def test_the_compute_counts_each_shared_run_once(tmp_path: Path) -> None:

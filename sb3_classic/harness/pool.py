@@ -203,7 +203,14 @@ def run_missing_runs(
     :return: None when the runs are done, else the exit status to stop with (130 interrupted, 2 cluster error)
     """
     where = f"the Dask cluster at {scheduler}" if scheduler else f"{workers} workers"
-    console.print(f"{n_runs} runs: {n_runs - len(pending)} cached, {len(pending)} to run on {where}")
+    # Runs of the same settings (a variant under two readings, two study files) share one cache entry: each is run once
+    by_key: dict[str, RunSpec] = {}
+    for spec in pending:
+        by_key.setdefault(spec.key(), spec)
+    distinct = list(by_key.values())
+    shared = f" ({len(pending) - len(distinct)} of them the same runs as others)" if len(distinct) < len(pending) else ""
+    console.print(f"{n_runs} runs: {n_runs - len(pending)} cached, {len(distinct)} to run on {where}{shared}")
+    pending = distinct
     try:
         run_pending(pending, workers, cache_dir, console, scheduler)
     except KeyboardInterrupt:
@@ -228,6 +235,11 @@ def _store(spec: RunSpec, future: "Future[RunResult]", cache_dir: Path) -> str |
     except Exception as error:
         # Raised in the worker, or by Dask (KilledWorker: its workers died; CancelledError: the cluster went away),
         # or by store_run (other versions)
+        if "Cancelled" in type(error).__name__:
+            return escape(
+                f"{type(error).__name__}: the Dask cluster dropped it (its scheduler or this client's connection went "
+                "away); the finished runs are cached: run the same command again to run the rest"
+            )
         return escape(f"{type(error).__name__}: {error}")
     return None
 

@@ -139,9 +139,45 @@ def evaluations_frame(timesteps: list[int], returns: list[list[float]], lengths:
     return pd.DataFrame(rows, columns=["eval_index", "timesteps", "return", "length"])
 
 
+class DamagedRunError(ValueError):
+    """A cached run whose files cannot be read (cut short, emptied, deleted): the message names its folder and the fix."""
+
+
+def _damaged(run_dir: Path, what: str) -> DamagedRunError:
+    return DamagedRunError(
+        f"The cached run in {run_dir} is damaged ({what}): delete that folder and run the command again to rerun it"
+    )
+
+
 def load_run(run_dir: Path) -> dict[str, Any]:
-    """:return: the summary (``run.json``) of a finished run"""
-    return json.loads((run_dir / RUN_FILE).read_text())
+    """
+    :return: the summary (``run.json``) of a finished run
+    :raise DamagedRunError: if it cannot be read
+    """
+    try:
+        summary = json.loads((run_dir / RUN_FILE).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise _damaged(run_dir, f"{RUN_FILE}: {error}") from error
+    if not isinstance(summary, dict):
+        raise _damaged(run_dir, f"{RUN_FILE} holds {type(summary).__name__}, not a run's summary")
+    return summary
+
+
+def load_run_table(run_dir: Path, name: str, min_rows: int = 0) -> pd.DataFrame:
+    """
+    :param run_dir: a finished run's folder
+    :param name: ``EPISODES_FILE`` or ``EVALUATIONS_FILE``
+    :param min_rows: rows it must have at least (an episode budget's episodes)
+    :return: the table
+    :raise DamagedRunError: if it cannot be read, or has fewer rows
+    """
+    try:
+        table = pd.read_csv(run_dir / name)
+    except (OSError, UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError) as error:
+        raise _damaged(run_dir, f"{name}: {error}") from error
+    if len(table) < min_rows:
+        raise _damaged(run_dir, f"{name} has {len(table)} rows, fewer than the {min_rows} of its budget")
+    return table
 
 
 @dataclass

@@ -17,7 +17,7 @@ from rich.markup import escape
 
 from sb3_classic.harness.common import positive_int
 from sb3_classic.harness.pool import report_missing, run_missing_runs
-from sb3_classic.harness.runner import RUN_FILE, RunError, check_run
+from sb3_classic.harness.runner import RUN_FILE, DamagedRunError, RunError, check_run
 from sb3_classic.studies.outputs import PROGRAM, load_study_results, plural, study_command, write_studies_index, write_study
 from sb3_classic.studies.spec import STATED, StudyError, StudyRun, StudySpec, load_study
 
@@ -174,8 +174,13 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
 
     # The command each study's outputs show re-runs it from scratch: its file and the budget options
     missing = []
-    for study in studies:
-        results = load_study_results(study, args.cache_dir)
+    try:
+        # All read before anything is written: a damaged cache entry names its folder, and no output is left half done
+        loaded = [load_study_results(study, args.cache_dir) for study in studies]
+    except DamagedRunError as error:
+        console.print(f"[red]{escape(str(error))}[/red]", highlight=False, soft_wrap=True)
+        return 2
+    for study, results in zip(studies, loaded, strict=True):
         missing += [run.spec for run in results.missing]
         path = write_study(results, results_dir, study_command(study, budget, defaults.program, defaults.root), reduced)
         for reading, judged in results.verdicts.items():

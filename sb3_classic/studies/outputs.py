@@ -21,7 +21,7 @@ import pandas as pd
 import yaml
 
 from sb3_classic.harness.common import code_versions
-from sb3_classic.harness.runner import EPISODES_FILE, RUN_FILE, load_run
+from sb3_classic.harness.runner import EPISODES_FILE, RUN_FILE, load_run, load_run_table
 from sb3_classic.studies import stats
 from sb3_classic.studies.spec import STATED, StudyRun, StudySpec
 
@@ -67,6 +67,7 @@ def load_study_results(study: StudySpec, cache_dir: Path) -> StudyResults:
     :param study: the study
     :param cache_dir: the harness's cache
     :return: its runs found in ``cache_dir``, their metrics and the claims' verdicts
+    :raise DamagedRunError: naming a cached run whose files cannot be read
     """
     results = StudyResults(study)
     frames: dict[tuple[str, str], list[pd.DataFrame]] = {}
@@ -78,7 +79,8 @@ def load_study_results(study: StudySpec, cache_dir: Path) -> StudyResults:
         summary = load_run(run_dir)
         results.run_seconds[run.spec.key()] = float(summary["learn_time_s"]) + float(summary.get("eval_time_s", 0.0))
         results.n_runs += 1
-        frames.setdefault((run.reading, run.variant), []).append(pd.read_csv(run_dir / EPISODES_FILE))
+        episodes = load_run_table(run_dir, EPISODES_FILE, study.budget.episodes or 0)
+        frames.setdefault((run.reading, run.variant), []).append(episodes)
         results.seeds.setdefault((run.reading, run.variant), []).append(run.seed)
     for key, episodes in frames.items():
         returns = stats.seed_returns(episodes, study.budget.episodes)
@@ -107,6 +109,21 @@ def study_command(study: StudySpec, extra: Sequence[str] = (), program: str = PR
     path, root = study.path.resolve(), (root or Path.cwd()).resolve()
     shown = path.relative_to(root).as_posix() if path.is_relative_to(root) else str(study.path)
     return shlex.join(["python", "-m", program, shown, *extra])
+
+
+def seeds_frame(results: StudyResults) -> pd.DataFrame:
+    """
+    :return: one row per run found: reading, variant, seed, each metric of the seed and whether it reached the
+        threshold (the values the intervals and verdicts are computed from)
+    """
+    rows = []
+    for (reading, variant), metrics in results.metrics.items():
+        for index, seed in enumerate(results.seeds[(reading, variant)]):
+            row: dict[str, Any] = {"reading": reading, "variant": variant, "seed": seed}
+            row |= {metric: float(metrics[metric][index]) for metric in stats.METRIC_LABELS}
+            row["reached"] = bool(metrics["reached"][index])
+            rows.append(row)
+    return pd.DataFrame(rows, columns=["reading", "variant", "seed", *stats.METRIC_LABELS, "reached"])
 
 
 def summary_frame(results: StudyResults) -> pd.DataFrame:
@@ -183,7 +200,8 @@ def plot_study(results: StudyResults, path: Path) -> Path:
 
 def write_study(results: StudyResults, results_dir: Path, command: str, reduced: bool = False) -> Path:
     """
-    Write ``<name>.png``, ``<name>.csv``, ``<name>.md`` and ``<name>.json`` of a study into ``results_dir``.
+    Write ``<name>.png``, ``<name>.csv`` (per variant), ``<name>-seeds.csv`` (per run), ``<name>.md`` and
+    ``<name>.json`` of a study into ``results_dir``.
 
     :param results: the study's results
     :param results_dir: where
@@ -195,6 +213,7 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
     results_dir.mkdir(parents=True, exist_ok=True)
     figure = plot_study(results, results_dir / f"{study.name}.png")
     summary_frame(results).to_csv(results_dir / f"{study.name}.csv", index=False)
+    seeds_frame(results).to_csv(results_dir / f"{study.name}-seeds.csv", index=False)
     claims = []
     for reading, judged in results.verdicts.items():
         for result in judged:
@@ -247,12 +266,22 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         "## Claims",
         "",
     ]
+    if results.missing:
+        lines += [
+            f"**Partial**: {len(results.missing)} of {results.n_runs + len(results.missing)} runs are missing (run the "
+            "command again to run them); the verdicts are of the runs found.",
+            "",
+        ]
+    partial = f" (partial: {len(results.missing)} runs missing)" if results.missing else ""
     for reading, judged in results.verdicts.items():
         suffix = "" if reading == STATED else f" (reading `{reading}`)"
-        for result in judged:
-            lines.append(f"- **{result.verdict}**{suffix}: {result.claim.text}. Measured: {result.measured}.")
-    if not any(results.verdicts.values()):
-        lines.append(f"- {NOT_RUN}")
+        by_text = {result.claim.text: result for result in judged}
+        for claim in study.claims:
+            result = by_text.get(claim.text)
+            if result is None:
+                lines.append(f"- **{NOT_RUN}**{suffix}: {claim.text} (the runs of a variant it compares are missing).")
+            else:
+                lines.append(f"- **{result.verdict}**{partial}{suffix}: {claim.text}. Measured: {result.measured}.")
     lines += [
         "",
         "## Table",
@@ -292,6 +321,10 @@ resamples; each variant's seeds resampled independently):
 - **reaches** / **below** a level, on the metric's own scale: the interval of A's metric lies at or above the level
   (*supported* / *not supported*), below it (the opposite), or across it (too close to call).
 - A claim with fewer than 5 seeds in one of its variants is too close to call, whatever its intervals.
+- Episodes to threshold is censored: a seed that never reaches the threshold counts as the budget, a lower bound of
+  its value. Comparisons between variants are of the means within the budget (restricted means); a verdict that
+  censoring could overturn is too close to call: a mean shown below a level, two variants shown alike, a comparison
+  where no seed of either reached the threshold, the spread over seeds.
 
 Metrics per seed, from the training return of each episode (the Monitor's): the mean over all episodes of the budget,
 the mean over the last 100, and the episodes until the mean of the study's `threshold_window` consecutive episodes

@@ -35,7 +35,7 @@ import math
 from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeGuard
 
 import gymnasium
 import rl_zoo3
@@ -337,6 +337,8 @@ class _Checker:
         for key, value in entry.items():
             if key == "n_timesteps":
                 self.fail(f"{where}.n_timesteps", "the budget is the study's `budget:` (episodes or steps): remove it")
+            elif key == "seed":
+                self.fail(f"{where}.seed", "each run's seed comes from the study's `seeds:` (a count or a list): remove it")
             elif (unknown := unknown_setting(algo, str(key))) is not None:
                 self.fail(f"{where}.{key}", unknown)
             self.float_strings(f"{where}.{key}", value)
@@ -409,8 +411,11 @@ def load_study(path: Path | str) -> StudySpec:
     # The study's own, else the harness's (CartPole-v1, Acrobot-v1), else Gymnasium's reward_threshold of the env
     default_threshold = THRESHOLDS.get(env_id, env_spec.reward_threshold if env_spec is not None else None)
     threshold = data.get("threshold", default_threshold)
-    if not isinstance(threshold, int | float) or isinstance(threshold, bool):
-        check.fail("threshold", f"{threshold!r}: give the return that counts as solved on {env_id}, e.g. threshold: 475")
+    if not _is_number(threshold):
+        check.fail(
+            "threshold",
+            f"{threshold!r}: give the return that counts as solved on {env_id}, a finite number, e.g. threshold: 475",
+        )
         threshold = math.nan
     claims = _claims(check, data, variants, float(threshold))
     if budget is not None and budget.steps is not None:
@@ -423,12 +428,19 @@ def load_study(path: Path | str) -> StudySpec:
                 )
     window = check.positive_int("threshold_window", data.get("threshold_window", 100))
     smooth = check.positive_int("smooth", data.get("smooth", 10))
+    name = data.get("study", path.stem)
+    if not _is_file_name(name):
+        check.fail(
+            "study",
+            f"{name!r}: the name of the study's output files (NAME.md, NAME.csv, ... in the results folder), without "
+            "'/', '\\' or a leading '.', e.g. study: fig27-sarsa-acrobot-layers (default: the file's name)",
+        )
     check.raise_if_any()
     assert budget is not None, "checked"
     assert window is not None, "checked"
     assert smooth is not None, "checked"
     study = StudySpec(
-        name=str(data.get("study", path.stem)),
+        name=str(name),
         title=str(data.get("title", path.stem)),
         source=str(data.get("source", "")),
         env_id=env_id,
@@ -487,12 +499,34 @@ def _env_and_algo(check: _Checker, data: Mapping[str, Any]) -> tuple[str, Any, s
     return env_id, env_spec, algo
 
 
+def _is_int(value: Any) -> TypeGuard[int]:
+    """:return: whether ``value`` is an integer (YAML's ``true`` is a bool, not 1)"""
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_number(value: Any) -> TypeGuard[int | float]:
+    """:return: whether ``value`` is a finite number (not a bool, not YAML's ``.nan`` or ``.inf``)"""
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _is_file_name(name: Any) -> bool:
+    """:return: whether ``name`` names a file in a folder (not a path out of it, not hidden, not empty)"""
+    return isinstance(name, str) and name.strip() == name != "" and not name.startswith(".") and not {"/", "\\"} & set(name)
+
+
+def _quote_hint(name: Any, variants: Mapping[str, Any]) -> str:
+    """:return: the fix where YAML read a variant's name as a number (``4`` for the variant ``'4'``), else ''"""
+    if not isinstance(name, str) and str(name) in variants:
+        return f" (YAML reads {name!r} as a number, not a name: quote it, '{name}')"
+    return ""
+
+
 def _seeds(check: _Checker, value: Any) -> tuple[int, ...]:
     if isinstance(value, int) and not isinstance(value, bool):
         if value < 1:
             check.fail("seeds", f"{value}: give the number of seeds (at least 1; the studies use 10) or a list")
         return tuple(range(value))
-    if isinstance(value, list) and value and all(isinstance(seed, int) and seed >= 0 for seed in value):
+    if isinstance(value, list) and value and all(_is_int(seed) and seed >= 0 for seed in value):
         if len(set(value)) < len(value):
             check.fail("seeds", f"{value}: a seed appears twice")
         return tuple(value)
@@ -643,16 +677,18 @@ def _claim(check: _Checker, where: str, item: Mapping[str, Any], variants: Mappi
     variant = item.get("variant")
     # (without variants, their own error says what to write)
     if variants and variant not in variants:
-        check.fail(f"{where}.variant", f"{variant!r} is not a variant: choose one of {choices}")
+        hint = _quote_hint(variant, variants)
+        check.fail(f"{where}.variant", f"{variant!r} is not a variant: choose one of {choices}{hint}")
     others = item.get("others", [])
     if isinstance(others, str):
         others = [others]
     elif not isinstance(others, list):
-        check.fail(f"{where}.others", f"{others!r}: a variant's name or a list of names, e.g. others: [n_steps=1]")
+        hint = _quote_hint(others, variants)
+        check.fail(f"{where}.others", f"{others!r}: a variant's name or a list of names, e.g. others: [n_steps=1]{hint}")
         others = []
     for other in others:
         if variants and other not in variants:
-            check.fail(f"{where}.others", f"{other!r} is not a variant: choose among {choices}")
+            check.fail(f"{where}.others", f"{other!r} is not a variant: choose among {choices}{_quote_hint(other, variants)}")
     if kind in ("better", "similar") and not others:
         check.fail(f"{where}.others", f"a {kind!r} claim compares `variant` with `others`: name at least one")
     if variant in others:
@@ -664,11 +700,11 @@ def _claim(check: _Checker, where: str, item: Mapping[str, Any], variants: Mappi
     if statistic not in STATISTICS:
         check.fail(f"{where}.statistic", f"{statistic!r}: choose mean or std (the spread over seeds)")
     margin = item.get("margin")
-    if kind == "similar" and (not isinstance(margin, int | float) or margin <= 0):
+    if kind == "similar" and (not _is_number(margin) or margin <= 0):
         check.fail(f"{where}.margin", "a 'similar' claim needs the largest difference counted as similar, e.g. margin: 25")
     value = item.get("value", threshold if kind in ("reaches", "below") and metric != "episodes_to_threshold" else None)
-    if kind in ("reaches", "below") and not isinstance(value, int | float):
-        check.fail(f"{where}.value", "the level to reach (or stay below), e.g. value: 475")
+    if kind in ("reaches", "below") and not _is_number(value):
+        check.fail(f"{where}.value", f"{value!r}: the level to reach (or stay below), a finite number, e.g. value: 475")
     return Claim(
         text=str(item.get("text", "")).strip(),
         kind=str(kind),
@@ -676,6 +712,6 @@ def _claim(check: _Checker, where: str, item: Mapping[str, Any], variants: Mappi
         others=tuple(str(other) for other in others),
         metric=str(metric),
         statistic=str(statistic),
-        margin=float(margin) if isinstance(margin, int | float) else None,
-        value=float(value) if isinstance(value, int | float) else None,
+        margin=float(margin) if _is_number(margin) else None,
+        value=float(value) if _is_number(value) else None,
     )

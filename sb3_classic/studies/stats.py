@@ -18,6 +18,11 @@ The rule (also in ``STUDIES.md``):
 
 - Any claim whose variants have fewer than ``MIN_SEEDS`` seeds is *too close to call*, whatever its intervals: a
   bootstrap over 2–4 values gives an interval, but not a 95% one.
+- Episodes to threshold is censored: a seed that never reaches the threshold counts as its episode budget, a lower
+  bound of its own value. Comparisons between variants are then of the means within the budget (restricted means),
+  which the budget bounds alike. A verdict that censoring could overturn is *too close to call* (``censored_verdict``):
+  a mean shown below a level, two variants shown alike, any comparison where no seed of either variant reached the
+  threshold, and the spread over seeds.
 
 Statistics over seeds: ``mean`` (the mean over seeds) or ``std`` (their sample standard deviation: a claim of
 consistent learning across seeds, where lower is better).
@@ -260,6 +265,7 @@ def judge(claim: Claim, metrics: Mapping[str, Mapping[str, np.ndarray]]) -> Clai
     """
     sign = 1.0 if higher_is_better(claim) else -1.0
     ours = metrics[claim.variant][claim.metric]
+    censored_notes: list[str] = []
     what = METRIC_LABELS[claim.metric] + (", spread over seeds (std)" if claim.statistic == "std" else "")
     comparisons = []
     if claim.kind in ("better", "similar"):
@@ -272,6 +278,7 @@ def judge(claim: Claim, metrics: Mapping[str, Mapping[str, np.ndarray]]) -> Clai
             else:
                 assert claim.margin is not None
                 verdict = _similar(difference, claim.margin)
+            verdict = censored_verdict(claim, verdict, difference, metrics, other, censored_notes)
             comparisons.append(Comparison(other, difference, verdict))
             # (each comparison's verdict where there are several: the claim's own is given beside it)
             each = f" ({verdict})" if len(claim.others) > 1 else ""
@@ -301,14 +308,74 @@ def judge(claim: Claim, metrics: Mapping[str, Mapping[str, np.ndarray]]) -> Clai
             verdict = NOT_SUPPORTED if claim.kind == "reaches" else SUPPORTED
         else:
             verdict = TOO_CLOSE
+        verdict = censored_verdict(claim, verdict, value, metrics, None, censored_notes)
         comparisons.append(Comparison(None, value, verdict))
         overall = verdict
         measured = f"{what} of {claim.variant}: {value.format()} against {claim.value:g}"
+    if claim.metric == "episodes_to_threshold":
+        never = [
+            f"{name} {np.count_nonzero(~metrics[name]['reached'])}/{len(metrics[name]['reached'])}"
+            for name in (claim.variant, *claim.others)
+            if not metrics[name]["reached"].all()
+        ]
+        if never:
+            measured += (
+                f" (seeds that never reached the threshold, counted as the budget: {', '.join(never)}"
+                + "".join(f"; {note}" for note in dict.fromkeys(censored_notes))
+                + ")"
+            )
     n_seeds = min(len(metrics[name][claim.metric]) for name in (claim.variant, *claim.others))
     if n_seeds < MIN_SEEDS:
         overall = TOO_CLOSE
         measured += f" (only {n_seeds} seeds in a variant: too few for a verdict, at least {MIN_SEEDS} are needed)"
     return ClaimResult(claim, overall, tuple(comparisons), measured)
+
+
+def censored_verdict(
+    claim: Claim,
+    verdict: str,
+    value: Interval,
+    metrics: Mapping[str, Mapping[str, np.ndarray]],
+    other: str | None,
+    notes: list[str],
+) -> str:
+    """
+    A comparison's verdict on episodes to threshold, where a seed that never reached the threshold counts as its
+    budget: a lower bound of its value, which may be any number of episodes beyond. What the budget bounds alike in
+    both variants (one reaching it earlier within the budget: the restricted means) stands; what a censored seed's
+    unknown value could overturn is too close to call.
+
+    :param claim: the claim
+    :param verdict: the comparison's verdict from its interval
+    :param value: that interval: of ``claim.variant`` − ``other``, or of the variant's statistic (``other`` None)
+    :param metrics: per variant, its ``seed_metrics``
+    :param other: the variant compared with, or None for a level
+    :param notes: where to append why a verdict was made too close to call
+    :return: the verdict, or too close to call
+    """
+    if claim.metric != "episodes_to_threshold" or verdict == TOO_CLOSE:
+        return verdict
+    names = [claim.variant] if other is None else [claim.variant, other]
+    censored = {name: not metrics[name]["reached"].all() for name in names}
+    if not any(censored.values()):
+        return verdict
+    if claim.statistic == "std":
+        notes.append("the spread over seeds of censored values is not known: too close to call")
+    elif other is None:
+        # Censoring only hides larger values: the interval above the level stands, one below it does not
+        if value.high - (claim.value or 0.0) < 0:
+            notes.append(
+                f"such a seed may take any number of episodes beyond the budget: the mean is not shown below {claim.value:g}"
+            )
+        else:
+            return verdict
+    elif not any(metrics[name]["reached"].any() for name in names):
+        notes.append(f"no seed of {claim.variant} or {other} reached it: both are the budget, nothing was measured")
+    elif claim.kind == "similar" and verdict == SUPPORTED:
+        notes.append("alike within the budget does not show them alike beyond it: too close to call")
+    else:
+        return verdict
+    return TOO_CLOSE
 
 
 def _directional(low: float, high: float) -> str:
