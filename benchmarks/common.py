@@ -5,7 +5,7 @@ and is re-exported here, so that ``from benchmarks.common import RunSpec`` keeps
 
 import argparse
 import contextlib
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +25,7 @@ from sb3_classic.harness.common import (
     register_algorithms,
     unknown_setting,
 )
+from sb3_classic.harness.runner import RunError, check_run
 
 __all__ = [
     "ALL_ALGOS",
@@ -109,3 +110,25 @@ def overrides_from_args(
         return parse_overrides(values, algos)
     except ValueError as error:
         parser.error(str(error))
+
+
+def check_overridden_settings(specs: Sequence[RunSpec], overrides: Mapping[str, Mapping[str, Any]]) -> list[str]:
+    """
+    Build the envs and model of each distinct setting that ``--set`` changed (``check_run``, no training), so that a
+    value the algorithm rejects (``update_mode=perstep``) fails before any run starts, not in every run of it.
+
+    :param specs: the runs to run
+    :param overrides: per algorithm, the keys ``--set`` replaces (``overrides_from_args``)
+    :return: the problems, each naming the algorithm, the env and the error
+    """
+    to_check: dict[tuple[str, str, str], RunSpec] = {}
+    for spec in specs:
+        if spec.algo in overrides:
+            to_check.setdefault((spec.algo, spec.env_id, spec.hyperparams_yaml), spec)
+    problems = []
+    for spec in to_check.values():
+        try:
+            check_run(spec)
+        except RunError as error:
+            problems.append(f"{spec.algo} on {spec.env_id}: {error}")
+    return problems

@@ -27,7 +27,14 @@ import yaml
 from rich.console import Console
 from rich.markup import escape
 
-from benchmarks.common import DEFAULT_CACHE_DIR, DEFAULT_RESULTS_DIR, ENV_IDS, QUICK_RESULTS_DIR, overrides_from_args
+from benchmarks.common import (
+    DEFAULT_CACHE_DIR,
+    DEFAULT_RESULTS_DIR,
+    ENV_IDS,
+    QUICK_RESULTS_DIR,
+    check_overridden_settings,
+    overrides_from_args,
+)
 from benchmarks.report import load_results, markdown_table, summary_table, threshold_crossings, write_learning_report
 from benchmarks.throughput import ThroughputSettings, run_throughput, throughput_header, write_throughput_report
 from sb3_classic.harness.common import (
@@ -258,6 +265,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not specs:
         parser.error(f"--seeds {settings.seeds} and --peer-seeds {settings.peer_seeds}: no run of {args.algos} to make")
     pending = [spec for spec in specs if not (spec.run_dir(args.cache_dir) / RUN_FILE).exists()]
+    problems = check_overridden_settings(pending, overrides)
+    if problems:
+        console.print(
+            "[red]Nothing was run: the algorithm rejects these --set values:\n  "
+            + "\n  ".join(map(escape, problems))
+            + "[/red]",
+            highlight=False,
+            soft_wrap=True,
+        )
+        return 2
     start = time.perf_counter()
     status = run_missing_runs(len(specs), pending, args.workers, args.cache_dir, console, args.scheduler)
     if status is not None:

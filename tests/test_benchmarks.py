@@ -477,6 +477,21 @@ def test_benchmark_set_needs_a_results_dir(capsys: pytest.CaptureFixture[str]) -
     assert "--set needs --results-dir" in capsys.readouterr().err
 
 
+def test_benchmark_set_values_the_algorithm_rejects_stop_before_any_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Each run started, and each failed with the same error ("2 runs failed")
+    status = main(
+        ["--set", "reinforce.update_mode=perstep", "--algos", "reinforce", "--envs", "CartPole-v1", "--seeds", "2"]
+        + ["--skip-throughput", "--budget", "2000", "--cache-dir", str(tmp_path / "cache"), "--results-dir", str(tmp_path)]
+    )
+    assert status == 2
+    output = " ".join(capsys.readouterr().out.split())
+    assert "Nothing was run: the algorithm rejects these --set values" in output
+    assert "reinforce on CartPole-v1: ValueError: update_mode='perstep'" in output
+    assert not (tmp_path / "cache").exists()
+
+
 def test_an_interruption_stops_the_running_runs_at_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # A Ctrl-C stops the pool: the runs not started are cancelled, and the running ones are stopped at once (not left
     # to finish, minutes in a study), without the temporary folders they trained in

@@ -152,6 +152,18 @@ def test_study_file_errors_name_the_field_and_the_fix(tmp_path: Path, change: tu
         assert part in message
 
 
+def test_a_folder_of_study_files_lists_every_bad_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # It stopped at the first file's errors
+    write_study(tmp_path, TINY.replace("algo: nstep_sarsa", "algo: sarsa"), "a.yml")
+    write_study(tmp_path, TINY, "b.yml")
+    write_study(tmp_path, TINY.replace("seeds: 2", "seeds: 0"), "c.yml")
+    assert studies_cli.main([str(tmp_path), "--list", "--cache-dir", str(tmp_path / "cache")]) == 2
+    output = " ".join(capsys.readouterr().out.split())
+    assert "a.yml: 1 problem(s): algo: 'sarsa' is not an algorithm" in output
+    assert "c.yml: 1 problem(s): seeds: 0: give the number of seeds" in output
+    assert "b.yml" not in output
+
+
 def test_a_variant_named_by_a_number_is_quoted_in_the_hint(tmp_path: Path) -> None:
     text = TINY.replace("n1: {n_steps: 1}", "'1': {n_steps: 1}").replace("others: [n1]", "others: [1]")
     with pytest.raises(

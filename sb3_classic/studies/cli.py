@@ -81,6 +81,32 @@ def study_files(paths: Sequence[Path]) -> list[Path]:
     return files
 
 
+def load_studies(
+    paths: Sequence[Path], seeds: int | None = None, episodes: int | None = None, steps: int | None = None
+) -> tuple[list[StudySpec], list[StudyError]]:
+    """
+    :param paths: study files and folders of them
+    :param seeds: a reduced run's seeds (``StudySpec.with_budget``), if any
+    :param episodes: its episode budget, if any
+    :param steps: its step budget, if any
+    :return: the studies, and the errors of every file that failed (all of them: a folder of studies used to stop at
+        its first bad file)
+    """
+    studies, errors = [], []
+    try:
+        files = study_files(paths)
+    except StudyError as error:
+        return [], [error]
+    reduced = seeds is not None or episodes is not None or steps is not None
+    for path in files:
+        try:
+            study = load_study(path)
+            studies.append(study.with_budget(seeds, episodes, steps) if reduced else study)
+        except StudyError as error:
+            errors.append(error)
+    return studies, errors
+
+
 def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> int:
     """
     The command line (``python -m sb3_classic.studies --help``).
@@ -121,13 +147,10 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
     console = Console()
 
     reduced = args.seeds is not None or args.episodes is not None or args.steps is not None
-    try:
-        studies = [
-            load_study(path).with_budget(args.seeds, args.episodes, args.steps) if reduced else load_study(path)
-            for path in study_files(args.studies)
-        ]
-    except StudyError as error:
-        console.print(f"[red]{escape(str(error))}[/red]", highlight=False, soft_wrap=True)
+    studies, errors = load_studies(args.studies, args.seeds, args.episodes, args.steps)
+    if errors:
+        for error in errors:
+            console.print(f"[red]{escape(str(error))}[/red]", highlight=False, soft_wrap=True)
         return 2
     names = [study.name for study in studies]
     duplicates = sorted({name for name in names if names.count(name) > 1})

@@ -277,11 +277,11 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         suffix = "" if reading == STATED else f" (reading `{reading}`)"
         by_text = {result.claim.text: result for result in judged}
         for claim in study.claims:
-            result = by_text.get(claim.text)
-            if result is None:
+            found = by_text.get(claim.text)
+            if found is None:
                 lines.append(f"- **{NOT_RUN}**{suffix}: {claim.text} (the runs of a variant it compares are missing).")
             else:
-                lines.append(f"- **{result.verdict}**{partial}{suffix}: {claim.text}. Measured: {result.measured}.")
+                lines.append(f"- **{found.verdict}**{partial}{suffix}: {claim.text}. Measured: {found.measured}.")
     lines += [
         "",
         "## Table",
