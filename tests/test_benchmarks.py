@@ -481,10 +481,10 @@ def test_benchmark_set_values_the_algorithm_rejects_stop_before_any_run(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     # Each run started, and each failed with the same error ("2 runs failed")
-    status = main(
-        ["--set", "reinforce.update_mode=perstep", "--algos", "reinforce", "--envs", "CartPole-v1", "--seeds", "2"]
-        + ["--skip-throughput", "--budget", "2000", "--cache-dir", str(tmp_path / "cache"), "--results-dir", str(tmp_path)]
-    )
+    command = ["--set", "reinforce.update_mode=perstep", "--algos", "reinforce", "--envs", "CartPole-v1", "--seeds", "2"]
+    command += ["--skip-throughput", "--budget", "2000", "--cache-dir", str(tmp_path / "cache")]
+    command += ["--results-dir", str(tmp_path)]
+    status = main(command)
     assert status == 2
     output = " ".join(capsys.readouterr().out.split())
     assert "Nothing was run: the algorithm rejects these --set values" in output

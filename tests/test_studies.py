@@ -12,6 +12,7 @@ import shlex
 import shutil
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -608,12 +609,12 @@ def test_runs_shared_by_readings_or_studies_are_run_once(tmp_path: Path, monkeyp
     assert "3 runs: 0 cached, 2 to run on 1 workers (1 of them the same runs as others)" in output.getvalue()
 
 
-def fake_cache(tmp_path: Path) -> tuple[Path, Path, Path]:
+def fake_cache(tmp_path: Path, text: str = TINY) -> tuple[Path, Path, Path]:
     """
-    :return: TINY's study file, a cache holding each of its runs (6 episodes of return 9 + seed + 10 × variant n3), and
-        a results folder
+    :return: the study file of ``text``, a cache holding each of its runs (6 episodes of return 9 + seed + 10 × variant
+        n3), and a results folder
     """
-    study_file = write_study(tmp_path, TINY)
+    study_file = write_study(tmp_path, text)
     cache = tmp_path / "cache"
     for run in load_study(study_file).runs():
         run_dir = run.spec.run_dir(cache)
@@ -640,6 +641,19 @@ def test_the_outputs_give_each_seed_and_say_when_runs_are_missing(tmp_path: Path
     assert "**Partial**: 1 of 4 runs are missing" in page
     assert "(partial: 1 runs missing): n = 3 beats n = 1" in page
     assert len(pd.read_csv(results / "study-seeds.csv")) == 3
+
+
+def test_runs_without_an_episode_are_said_to_be(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # A budget of 5 env steps: a seed with no episode made every mean NaN, with NumPy's "Mean of empty slice" only
+    study_file, cache, results = fake_cache(tmp_path, TINY.replace("budget: {episodes: 6}", "budget: {steps: 5}"))
+    (load_study(study_file).runs()[0].spec.run_dir(cache) / "episodes.csv").write_text("return\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        command = [str(study_file), "--report-only", "--cache-dir", str(cache), "--results-dir", str(results)]
+        assert studies_cli.main(command) == 0
+    page = " ".join((results / "study.md").read_text().split())
+    assert "**1 run completed no episode** in 5 env steps" in page
+    assert "too close to call" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize(

@@ -57,6 +57,11 @@ class StudyResults:
     n_runs: int = 0
 
     @property
+    def runs_without_episodes(self) -> int:
+        """Runs found that completed no episode within their budget (a budget in env steps shorter than an episode)."""
+        return sum(int(np.count_nonzero(np.isnan(metrics["mean_return"]))) for metrics in self.metrics.values())
+
+    @property
     def learn_seconds(self) -> float:
         """The compute of the study's distinct runs, in CPU seconds."""
         return math.fsum(self.run_seconds.values())
@@ -261,6 +266,7 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         "- Intervals: 95% bootstrap over seeds (`scipy.stats.bootstrap`, BCa); verdicts by the rule of "
         "[STUDIES.md](STUDIES.md).",
         *_short_budget_notes(study),
+        *_empty_run_notes(results),
         f"- Versions: {', '.join(f'{name} {version}' for name, version in code_versions(study.algo).items())}.",
         "",
         "## Claims",
@@ -406,6 +412,18 @@ def write_studies_index(
     results_dir.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines))
     return path
+
+
+def _empty_run_notes(results: StudyResults) -> list[str]:
+    """:return: what runs that completed no episode make of the metrics"""
+    empty = results.runs_without_episodes
+    if not empty:
+        return []
+    return [
+        f"- **{empty} {plural(empty, 'run', 'runs')} completed no episode** in {results.study.budget.describe()}: "
+        "its metrics are NaN (no return to average), and so is every mean over seeds with it: the claims on them are "
+        "too close to call. Give a budget of at least a few episodes."
+    ]
 
 
 def _short_budget_notes(study: StudySpec) -> list[str]:

@@ -139,9 +139,11 @@ def seed_metrics(returns: Sequence[np.ndarray] | np.ndarray, threshold: float, w
     """
     rows = [np.asarray(row, dtype=float) for row in returns]
     to_threshold = [episodes_to_threshold(row[None], threshold, window) for row in rows]
+    # A seed with no episode (a budget in env steps shorter than one) has no return to average: NaN, without NumPy's
+    # "Mean of empty slice" warning
     return {
-        "mean_return": np.array([row.mean() for row in rows]),
-        "last_100_return": np.array([row[-LAST_EPISODES:].mean() for row in rows]),
+        "mean_return": np.array([row.mean() if len(row) else np.nan for row in rows]),
+        "last_100_return": np.array([row[-LAST_EPISODES:].mean() if len(row) else np.nan for row in rows]),
         "episodes_to_threshold": np.concatenate([first for first, _ in to_threshold]),
         "reached": np.concatenate([reached for _, reached in to_threshold]),
     }
@@ -166,7 +168,8 @@ def interval(values: np.ndarray, statistic: str = "mean", seed: int = 0) -> Inte
     function = _statistic(statistic)
     with np.errstate(invalid="ignore", divide="ignore"):
         estimate = float(function(values, axis=-1)) if len(values) else float("nan")
-    if len(values) < (3 if statistic == "std" else 2):
+    if len(values) < (3 if statistic == "std" else 2) or np.isnan(values).any():
+        # (NaN: a seed that completed no episode, which has no return)
         return Interval(estimate, float("nan"), float("nan"))
     if np.ptp(values) == 0:
         return Interval(estimate, estimate, estimate)
@@ -185,7 +188,7 @@ def difference_interval(a: np.ndarray, b: np.ndarray, statistic: str = "mean", s
     function = _statistic(statistic)
     with np.errstate(invalid="ignore", divide="ignore"):
         estimate = float(function(a, axis=-1) - function(b, axis=-1)) if len(a) and len(b) else float("nan")
-    if min(len(a), len(b)) < (3 if statistic == "std" else 2):
+    if min(len(a), len(b)) < (3 if statistic == "std" else 2) or np.isnan(a).any() or np.isnan(b).any():
         return Interval(estimate, float("nan"), float("nan"))
     if np.ptp(a) == 0 and np.ptp(b) == 0:
         return Interval(estimate, estimate, estimate)
