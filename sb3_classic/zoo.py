@@ -184,8 +184,8 @@ def sample_nstep_sarsa_params(
     """
     Optuna search space of n-step SARSA (rl-zoo3's ``-optimize``): n, learning rate, steps and gradient steps per
     update, γ, Expected SARSA or not, the λ of the targets, the weight average of the greedy policy, the ε schedule
-    (exponential per episode or linear, and its floor), the loss, learning-rate step decay, and the Q-network's depth,
-    width, activation and initialisation.
+    (exponential per episode or linear, its start and its floor), the loss, learning-rate step decay, and the
+    Q-network's depth, width, activation and initialisation.
 
     :param trial: the Optuna trial to sample from
     :param n_actions: size of a Box action space (unused)
@@ -209,6 +209,9 @@ def sample_nstep_sarsa_params(
         "exploration_schedule": trial.suggest_categorical("exploration_schedule", ("exponential", "linear")),
         "exploration_decay_rate": trial.suggest_categorical("exploration_decay_rate", (0.9, 0.95, 0.98, 0.99, 0.995, 0.999)),
         "exploration_fraction": trial.suggest_categorical("exploration_fraction", (0.05, 0.1, 0.2, 0.4)),
+        # The initial ε too, at or above the floor: the YAML's would be kept (MountainCar-v0's 0.0, below a sampled
+        # floor, was refused and ended the study)
+        "exploration_initial_eps": trial.suggest_categorical("exploration_initial_eps", (0.2, 0.5, 1.0)),
         "exploration_final_eps": trial.suggest_float("exploration_final_eps", 0.0, 0.2),
         "loss_function": trial.suggest_categorical("loss_function", ("mse", "huber")),
         **_suggest_lr_decay(trial),

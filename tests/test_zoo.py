@@ -64,7 +64,8 @@ SEARCH_SPACES = {
     "nstep_sarsa": COMMON_SPACE
     | {"n_steps", "learning_rate", "train_freq", "gradient_steps", "expected_sarsa", "td_lambda", "loss_function"}
     | {"averaging_tau"}
-    | {"exploration_schedule", "exploration_decay_rate", "exploration_fraction", "exploration_final_eps"},
+    | {"exploration_schedule", "exploration_decay_rate", "exploration_fraction", "exploration_initial_eps"}
+    | {"exploration_final_eps"},
 }
 
 # One torch thread per command (the tests run two at a time on two cores); no display
@@ -348,10 +349,17 @@ def test_search_space(algo: str, sampler: Callable[..., optuna.samplers.BaseSamp
         # rl-zoo3 converts a stored trial with the converter: it must give the same arguments
         assert CONVERTERS[algo](trial.params) == hyperparams
         assert set(hyperparams) <= constructor_arguments(algo)
-        # rl-zoo3 puts them over the YAML's: they replace a decay that would conflict with them
-        from_yaml: dict[str, Any] = {"lr_decay_milestones": [300, 500]}
-        model = ALGORITHMS[algo]("MlpPolicy", "CartPole-v1", device="cpu", **{**from_yaml, **hyperparams})
-        return float(sum(param.numel() for param in model.policy.parameters()))
+        # rl-zoo3 puts them over each YAML entry's (``objective``: kwargs.update(sampled)): every entry the package
+        # ships must give a model the algorithm accepts, or the zoo's study ends (MountainCar-v0's ε of 0.0 under a
+        # sampled floor did); and they replace a decay that would conflict with them
+        total = 0.0
+        for env_id, entry in yaml.safe_load(hyperparams_path(algo).read_text()).items():
+            from_yaml = {key: value for key, value in entry.items() if key not in ZOO_KEYS | {"n_timesteps"}}
+            from_yaml["lr_decay_milestones"] = [300, 500]
+            env = env_id if env_id != "default" and env_id in gym.registry else "CartPole-v1"
+            model = ALGORITHMS[algo]("MlpPolicy", env, device="cpu", **{**from_yaml, **hyperparams})
+            total += sum(param.numel() for param in model.policy.parameters())
+        return total
 
     kwargs = {"n_startup_trials": 3, "multivariate": True} if sampler is optuna.samplers.TPESampler else {}
     study = optuna.create_study(sampler=sampler(seed=0, **kwargs))
