@@ -1,6 +1,8 @@
 """The Stable-Baselines3 contract, for every algorithm of the package (as sb3-contrib's test_run/test_save_load)."""
 
 import glob
+import inspect
+import re
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -124,6 +126,58 @@ def test_load_takes_what_sb3_and_the_zoo_pass(model_class: type[Any], tmp_path: 
     loaded = model_class.load(tmp_path / "model.zip", env=make_vec_env("CartPole-v1"), max_grad_norm=None)
     loaded.learn(300)
     assert loaded._n_updates > frozen._n_updates
+
+
+@pytest.mark.parametrize(
+    ("model_class", "changes", "message"),
+    [
+        # Each was accepted by load() (rl-zoo3's -i -params ...): trained silently, or failed deep inside
+        (NStepSARSA, dict(gamma=1.5), r"gamma=1.5"),
+        (NStepSARSA, dict(n_steps=0), r"n_steps=0"),
+        (NStepSARSA, dict(train_freq="x"), r"train_freq='x'"),
+        (NStepSARSA, dict(exploration_schedule="cosine"), r"exploration_schedule='cosine'"),
+        (NStepSARSA, dict(expected_sarsa="yes"), r"expected_sarsa='yes'"),
+        (REINFORCE, dict(update_mode="xx"), r"update_mode='xx'"),
+        (REINFORCE, dict(n_episodes=0), r"n_episodes=0"),
+        (REINFORCE, dict(lr_decay_every=0), r"lr_decay_every=0"),
+        (REINFORCE, dict(lr_decay_every=5, lr_decay_milestones=[10]), r"lr_decay_every or lr_decay_milestones"),
+    ],
+)
+def test_load_checks_what_it_changes_as_the_constructor_does(
+    model_class: type[Any], changes: dict[str, Any], message: str, tmp_path: Path
+) -> None:
+    make_model(model_class, seed=0).learn(200).save(tmp_path / "model.zip")
+    with pytest.raises((ValueError, TypeError), match=message):
+        model_class.load(tmp_path / "model.zip", env=make_vec_env("CartPole-v1"), **changes)
+    with pytest.raises((ValueError, TypeError), match=message):
+        model_class("MlpPolicy", "CartPole-v1", **changes)
+
+
+@pytest.mark.parametrize(
+    ("model_class", "trained_with", "loaded_with"),
+    [
+        (NStepSARSA, dict(averaging_tau=None), dict(averaging_tau=0.05)),
+        (NStepSARSA, dict(averaging_tau=0.05), dict(averaging_tau=None)),
+        (NStepSARSA, dict(), dict(target_update_interval=1)),
+        (REINFORCE, dict(use_baseline=False), dict(use_baseline=True)),
+        (REINFORCE, dict(), dict(use_baseline=False)),
+    ],
+)
+def test_load_names_an_argument_that_changes_the_networks(
+    model_class: type[Any], trained_with: dict[str, Any], loaded_with: dict[str, Any], tmp_path: Path
+) -> None:
+    # It failed in torch's load_state_dict ("Missing key(s) in state_dict: q_net_average..."), for a YAML entry's value
+    make_model(model_class, seed=0, **trained_with).learn(200).save(tmp_path / "model.zip")
+    ((key, value),) = loaded_with.items()
+    saved = trained_with.get(key, inspect.signature(model_class.__init__).parameters[key].default)
+    expected = f"{key}={value!r} builds other networks than those of the saved model, trained with {key}={saved!r}"
+    with pytest.raises(ValueError, match=re.escape(expected)) as error:
+        model_class.load(tmp_path / "model.zip", **loaded_with)
+    assert f"-params {key}:{saved!r}" in str(error.value)
+    # The saved value continues it; so does a value that builds the same networks (another τ)
+    model_class.load(tmp_path / "model.zip", **{key: saved})
+    if key == "averaging_tau" and saved is not None:
+        model_class.load(tmp_path / "model.zip", averaging_tau=0.2)
 
 
 @pytest.mark.parametrize("model_class", MODEL_LIST)

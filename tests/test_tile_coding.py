@@ -5,6 +5,7 @@ import os
 import re
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -335,6 +336,16 @@ def test_numpy_counts_and_hashed_large_spaces_are_accepted() -> None:
     assert indices.shape == (5, 8)
     assert int(indices.min()) >= 0
     assert int(indices.max()) < 4096
+
+
+def test_many_dense_features_warn_naming_hash_size() -> None:
+    # Acrobot-v1's 6 dimensions with the defaults: 8 × 9^6 = 4,251,528 features, which trained for minutes without output
+    with pytest.warns(UserWarning, match=r"4,251,528 dense features: .* Pass hash_size"):
+        TileCoding(spaces.Box(0.0, 1.0, (6,)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        TileCoding(spaces.Box(0.0, 1.0, (6,)), hash_size=4096)
+        TileCoding(spaces.Box(0.0, 1.0, (4,)))  # 8 × 9^4 = 52,488
 
 
 def test_non_box_space_raises() -> None:

@@ -1,13 +1,16 @@
 """The base class of sb3_classic's algorithms: SB3's on-policy loop around a buffer that keeps whole trajectories."""
 
+import contextvars
 import inspect
+import io
 import math
 import numbers
+import pathlib
 import re
 import warnings
 from abc import abstractmethod
-from collections.abc import Sequence
-from typing import Any, TypeVar
+from collections.abc import Callable, Sequence
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 import torch as th
@@ -15,6 +18,7 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import check_for_correct_spaces, obs_as_tensor, update_learning_rate
 from stable_baselines3.common.vec_env import VecEnv
@@ -25,6 +29,9 @@ from sb3_classic.common.schedules import StepDecay
 from sb3_classic.common.utils import check_bool, check_choice, check_learning_rate, check_positive_int, check_range
 
 SelfClassicOnPolicyAlgorithm = TypeVar("SelfClassicOnPolicyAlgorithm", bound="ClassicOnPolicyAlgorithm")
+
+#: True while ``load()`` builds a model (its checks then accept a learning rate of 0)
+LOADING: contextvars.ContextVar[bool] = contextvars.ContextVar("sb3_classic_loading", default=False)
 #: The policy's arguments the algorithm passes itself (not ``policy_kwargs``)
 _POLICY_ARGUMENTS = {
     "self",
@@ -160,12 +167,71 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         names = ", ".join(space.__name__ for space in supported)
         return f"{type(self).__name__} supports {names} action spaces, not {self.action_space}"
 
+    #: Constructor arguments that decide which networks the policy has (a bootstrap copy, a weight average, v̂), with
+    #: whether a value builds that network: ``load()`` cannot put saved weights into other networks
+    _network_arguments: ClassVar[dict[str, Callable[[Any], bool]]] = {}
+
+    @classmethod
+    def load(
+        cls: type[SelfClassicOnPolicyAlgorithm],
+        path: str | pathlib.Path | io.BufferedIOBase,
+        env: GymEnv | None = None,
+        device: th.device | str = "auto",
+        custom_objects: dict[str, Any] | None = None,
+        print_system_info: bool = False,
+        force_reset: bool = True,
+        **kwargs: Any,
+    ) -> SelfClassicOnPolicyAlgorithm:
+        """
+        SB3's ``load``: the model saved in ``path``, with ``kwargs`` changing its arguments (rl-zoo3's ``-i`` passes the
+        YAML entry's). What they change is checked as the constructor checks it, and an argument that would build
+        other networks than the saved ones (``averaging_tau``, ``target_update_interval``, ``use_baseline``) is named,
+        as SB3 names ``policy_kwargs`` that differ from the saved ones.
+
+        :param path: the saved file (or a file-like object)
+        :param env: the env to continue on (``None``: only to predict)
+        :param device: where the networks go
+        :param custom_objects: values to use instead of the saved ones (not deserialised)
+        :param print_system_info: print the saved model's and this system's versions
+        :param force_reset: reset the envs before training
+        :param kwargs: arguments to change
+        :return: the model
+        :raise ValueError: for an invalid value, or one that changes the networks
+        """
+        token = LOADING.set(True)
+        try:
+            return super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
+        except RuntimeError as error:
+            if "state_dict" not in str(error) or not set(kwargs) & set(cls._network_arguments):
+                raise
+            if isinstance(path, io.BufferedIOBase):
+                path.seek(0)
+            data, _, _ = load_from_zip_file(path, load_data=True, device="cpu", custom_objects=custom_objects)
+            defaults = inspect.signature(cls.__init__).parameters
+            saved = {key: (data or {}).get(key, defaults[key].default) for key in cls._network_arguments}
+            changed = [
+                (key, kwargs[key], saved[key])
+                for key, builds in cls._network_arguments.items()
+                if key in kwargs and builds(kwargs[key]) != builds(saved[key])
+            ]
+            if not changed:
+                raise
+            key, given, saved = changed[0]
+            raise ValueError(
+                f"{cls.__name__}.load: {key}={given!r} builds other networks than those of the saved model, trained with "
+                f"{key}={saved!r}, so its weights cannot be loaded. Pass {key}={saved!r} to continue it (rl-zoo3's -i: "
+                f"-params {key}:{saved!r}), or train a new model with {key}={given!r}"
+            ) from error
+        finally:
+            LOADING.reset(token)
+
     def _check_arguments(self) -> None:
         """
-        Raise a ValueError naming the argument for anything invalid; subclasses extend it and call it at the end of
-        their constructor. (Not on ``load()``: rl-zoo3's ``enjoy`` loads with ``learning_rate=0.0``, as SB3 allows.)
+        Raise a ValueError naming the argument for anything invalid; subclasses extend it. ``_setup_model`` calls it,
+        so that ``load(..., **kwargs)`` (rl-zoo3's ``-i``) checks what it changes as the constructor does; a learning
+        rate of 0 is accepted there (rl-zoo3's ``enjoy`` loads with ``learning_rate=0.0``, as SB3 allows).
         """
-        check_learning_rate("learning_rate", self.learning_rate)
+        check_learning_rate("learning_rate", self.learning_rate, allow_zero=LOADING.get())
         check_range("gamma", self.gamma, 0.0, 1.0, hint="0.99 is the usual choice")
         if isinstance(self.max_grad_norm, bool) or not isinstance(self.max_grad_norm, numbers.Real):
             raise TypeError(f"max_grad_norm={self.max_grad_norm!r} must be a number > 0, or None for no clipping")
@@ -208,6 +274,10 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         return 1024
 
     def _setup_model(self) -> None:
+        if self.max_grad_norm is None:
+            # No clipping, as the constructor stores it (load(..., max_grad_norm=None) sets None: rl-zoo3's -i)
+            self.max_grad_norm = math.inf
+        self._check_arguments()
         self._setup_lr_schedule()
         self.lr_decay = StepDecay(self.lr_decay_factor, self.lr_decay_every, self.lr_decay_milestones)
         # The env's value of action index 0 (Discrete/MultiDiscrete `start`), added to what the envs are sent

@@ -24,6 +24,7 @@ offsets by the first odd integers (§9.5.4, p. 219–220, after Miller and Glanz
 """
 
 import math
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -43,6 +44,8 @@ ORIGINS = ("low", "zero")
 HASH_MODULUS = 2**31 - 1
 #: The most dense features (``hash_size=None``) a tile coder builds: 2^24, a 64 MiB float32 row; more needs hash_size
 MAX_DENSE_FEATURES = 2**24
+#: Above this many dense features (2^20), a tile coder warns: q̂ over them takes milliseconds per env step
+SLOW_DENSE_FEATURES = 2**20
 _HASH_MULTIPLIER = 16_777_619
 _HASH_BASIS = 2_166_136_261 % HASH_MODULUS
 
@@ -113,6 +116,14 @@ def _check_grid(
             f"dense features, more than {MAX_DENSE_FEATURES:,} (a float32 row of them would take "
             f"{dense_size * 4 / 2**30:.3g} GiB, as would each action's weights): pass hash_size (e.g. 4096, as the "
             "book's IHT for Mountain Car) to hash the tiles to that many features, or fewer tiles_per_dim"
+        )
+    if hash_size is None and dense_size > SLOW_DENSE_FEATURES:
+        warnings.warn(
+            f"TileCoding: n_tilings={n_tilings} tilings of Π(tiles_per_dim + 1) tiles over {n_dims} dimensions are "
+            f"{dense_size:,} dense features: every env step reads and updates q̂'s {dense_size:,} weights per action "
+            "(milliseconds each on a CPU). Pass hash_size (e.g. 4096, as the book's IHT for Mountain Car) to hash the "
+            "tiles to that many features, or fewer tiles_per_dim",
+            stacklevel=4,
         )
     return tuple(int(n) for n in tiles), lows, highs
 

@@ -10,16 +10,18 @@ from stable_baselines3.common.type_aliases import Schedule
 from stable_baselines3.common.utils import FloatSchedule
 
 
-def check_learning_rate(name: str, value: float | Schedule) -> None:
+def check_learning_rate(name: str, value: float | Schedule, allow_zero: bool = False) -> None:
     """
     :param name: the argument's name
     :param value: a positive float, or an SB3 schedule whose values are positive
+    :param allow_zero: also accept 0 (``load(..., learning_rate=0.0)``: a model that is evaluated, not trained, as
+        rl-zoo3's ``enjoy`` loads it)
     """
     try:
         start, end = FloatSchedule(value)(1.0), FloatSchedule(value)(0.0)
     except (AssertionError, TypeError) as error:
         raise TypeError(f"{name}={value!r} must be a float or an SB3 schedule (e.g. LinearSchedule)") from error
-    if not (start > 0 and end >= 0 and math.isfinite(start) and math.isfinite(end)):
+    if not ((start > 0 or (allow_zero and start == 0)) and end >= 0 and math.isfinite(start) and math.isfinite(end)):
         raise ValueError(
             f"{name}={value!r} must be finite and > 0 (a learning rate of {start} at the start, {end} at the end)"
         )

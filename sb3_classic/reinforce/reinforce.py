@@ -1,4 +1,4 @@
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
@@ -9,7 +9,7 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 from stable_baselines3.common.utils import FloatSchedule, explained_variance, obs_as_tensor
 
 from sb3_classic.common.buffers import TrainingBatch, select
-from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
+from sb3_classic.common.on_policy_algorithm import LOADING, ClassicOnPolicyAlgorithm
 from sb3_classic.common.returns import discounted_returns
 from sb3_classic.common.utils import check_bool, check_choice, check_learning_rate, check_positive_int, check_range
 from sb3_classic.reinforce.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, REINFORCEPolicy
@@ -100,6 +100,7 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         "CnnPolicy": CnnPolicy,
         "MultiInputPolicy": MultiInputPolicy,
     }
+    _network_arguments: ClassVar[dict[str, Callable[[Any], bool]]] = {"use_baseline": bool}
     policy: REINFORCEPolicy
     value_lr_schedule: Schedule
 
@@ -161,13 +162,12 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         self.gamma_t_factor = gamma_t_factor
         self.normalize_advantage = normalize_advantage
         self.ent_coef = ent_coef
-        self._check_arguments()
         if _init_setup_model:
-            self._setup_model()
+            self._setup_model()  # (which checks the arguments first)
 
     def _check_arguments(self) -> None:
         super()._check_arguments()
-        check_learning_rate("value_learning_rate", self.value_learning_rate)
+        check_learning_rate("value_learning_rate", self.value_learning_rate, allow_zero=LOADING.get())
         check_positive_int("n_episodes", self.n_episodes, hint="1 is the book's algorithm")
         # (use_baseline: checked by the policy, which takes it)
         for name in ("gamma_t_factor", "normalize_advantage"):

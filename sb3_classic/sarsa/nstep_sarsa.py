@@ -1,5 +1,5 @@
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, ClassVar, Literal, TypeVar
 
 import numpy as np
@@ -146,6 +146,10 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         "CnnPolicy": CnnPolicy,
         "MultiInputPolicy": MultiInputPolicy,
     }
+    _network_arguments: ClassVar[dict[str, Callable[[Any], bool]]] = {
+        "target_update_interval": lambda value: value is not None,
+        "averaging_tau": lambda value: value is not None,
+    }
     policy: SARSAPolicy
     action_space: spaces.Discrete
     exploration_schedule_fn: ExponentialDecay | LinearSchedule
@@ -228,9 +232,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self.exploration_rate = exploration_initial_eps
         # q̂(S, ·) of the rollout loop's last step, the update count and the env steps when it was computed
         self._rollout_q_values: tuple[np.ndarray, int, int] = (np.zeros(0), -1, -1)
-        self._check_arguments()
         if _init_setup_model:
-            self._setup_model()
+            self._setup_model()  # (which checks the arguments first)
 
     def _unsupported_action_space_message(self, supported: tuple[type[spaces.Space], ...]) -> str:
         return (
