@@ -227,6 +227,9 @@ def test_random_walk_is_seeded() -> None:
 def test_random_walk_bad_n_states(n_states: object) -> None:
     with pytest.raises(ValueError, match=f"n_states={n_states!r} must be an odd integer"):
         RandomWalkEnv(n_states)  # type: ignore[arg-type]
+    # The true values of a walk the env refuses: they were [] for 0 and -3, and values of no walk for 4
+    with pytest.raises(ValueError, match=f"n_states={n_states!r} must be an odd integer"):
+        random_walk_true_values(n_states)  # type: ignore[arg-type]
 
 
 def test_random_walk_takes_a_numpy_integer() -> None:

@@ -272,8 +272,11 @@ def test_batch_mode_differs_from_the_book_at_episode_ends() -> None:
     assert np.abs(results["batch"] - results["per_step"]).max() > 1e-3
 
 
-def test_random_tie_breaking_in_the_behaviour_policy_only() -> None:
-    """A q̂ of zeros: the behaviour policy tries every action; predict(deterministic=True) stays reproducible."""
+def test_random_tie_breaking_in_the_behaviour_policy_and_stochastic_predict() -> None:
+    """
+    A q̂ of zeros: the behaviour policy tries every action, and so does predict(deterministic=False) (it took action 0
+    1000 times in 1000, with ε = 0); predict(deterministic=True) stays reproducible.
+    """
     env = FeatureEpisodes(LENGTHS)
     model = NStepSARSA(
         "MlpPolicy", vec(env), exploration_initial_eps=0.0, exploration_final_eps=0.0,
@@ -286,6 +289,10 @@ def test_random_tie_breaking_in_the_behaviour_policy_only() -> None:
     assert np.bincount(sampled, minlength=N_ACTIONS).min() > 60
     greedy, _ = model.predict(obs.numpy(), deterministic=True)
     np.testing.assert_array_equal(greedy, np.zeros(300))
+    stochastic, _ = model.predict(obs.numpy(), deterministic=False)
+    assert np.bincount(stochastic, minlength=N_ACTIONS).min() > 60
+    one = [int(model.predict(obs[0].numpy(), deterministic=False)[0]) for _ in range(60)]
+    assert set(one) == set(range(N_ACTIONS))
 
 
 # --- REINFORCE (S&B §13.3, §13.4) ------------------------------------------------------------------------------------

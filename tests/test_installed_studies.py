@@ -73,6 +73,7 @@ def test_an_installed_user_runs_a_study_in_their_folder(tmp_path: Path) -> None:
     results = work / "studies-results"
     assert sorted(path.name for path in results.iterdir()) == [
         "STUDIES.md",
+        "my_study-seeds.csv",
         "my_study.csv",
         "my_study.json",
         "my_study.md",

@@ -348,6 +348,19 @@ def test_many_dense_features_warn_naming_hash_size() -> None:
         TileCoding(spaces.Box(0.0, 1.0, (4,)))  # 8 × 9^4 = 52,488
 
 
+@pytest.mark.parametrize("hash_size", [None, 4096])
+def test_a_nan_observation_is_named(hash_size: int | None) -> None:
+    # Dense: int64 garbage indices (8070450532247928836), then an IndexError deep inside; hashed: ordinary-looking ones
+    coder = TileCoding(BOX, hash_size=hash_size)
+    observations = th.tensor([[0.5, 0.5], [0.2, float("nan")]])
+    with pytest.raises(ValueError, match=r"observation 1 of the batch holds NaN \(dimension 1\)"):
+        coder(observations)
+    with pytest.raises(ValueError, match="holds NaN"):
+        tile_indices(observations, 8, 8, 0.0, 1.0, hash_size=hash_size)
+    # ±inf are clipped to the edge tiles, as before
+    assert coder(th.tensor([[float("inf"), -float("inf")]])).sum() == 8
+
+
 def test_non_box_space_raises() -> None:
     with pytest.raises(TypeError, match="observation_space=Discrete"):
         TileCoding(spaces.Discrete(3))

@@ -128,6 +128,15 @@ def _check_grid(
     return tuple(int(n) for n in tiles), lows, highs
 
 
+def _nan_message(x: np.ndarray) -> str:
+    """:return: the error of a batch of observations ``x`` (batch, n_dims) holding NaN, naming the first"""
+    row, dim = np.argwhere(np.isnan(x))[0]
+    return (
+        f"TileCoding: observation {row} of the batch holds NaN (dimension {dim}), which is in no tile: tile coding "
+        "needs numbers (±inf are clipped to the edge tiles). Check the env's observations"
+    )
+
+
 def _coordinates(
     observations: th.Tensor,
     n_tilings: int,
@@ -137,8 +146,14 @@ def _coordinates(
     origin: th.Tensor,
     offsets: th.Tensor,
 ) -> th.Tensor:
-    """The body of ``tile_coordinates``, on checked float64 tensors: ``offsets`` is t·(2d + 1), shape (n_tilings, n_dims)."""
+    """
+    The body of ``tile_coordinates``, on checked float64 tensors: ``offsets`` is t·(2d + 1), shape (n_tilings, n_dims).
+
+    :raises ValueError: if an observation holds NaN
+    """
     x = th.clamp(observations.reshape(len(observations), -1).to(th.float64), low, high)
+    if th.isnan(x).any():
+        raise ValueError(_nan_message(x.cpu().numpy()))
     # Position in tile widths from the origin (§9.5.4: tiles of width (high − low) / tiles_per_dim)
     scaled = tiles_per_dim * (x - origin) / (high - low)
     # tiles3: q = ⌊f · n_tilings⌋, then tiling t's coordinate ⌊(q + t·(2d + 1)) / n_tilings⌋ (asymmetric offsets, §9.5.4)
@@ -246,7 +261,7 @@ def tile_coordinates(
     :param high: upper end of the range of each dimension; above is clipped
     :param origin: ``"low"`` (tiling 0's boundaries from ``low``) or ``"zero"`` (from 0, as the book's footnote)
     :return: coordinates c_{t,d}, shape (batch, n_tilings, n_dims), int64
-    :raises ValueError: if an argument is out of its domain (the message names it)
+    :raises ValueError: if an argument is out of its domain (the message names it), or an observation holds NaN
     """
     observations = th.as_tensor(observations)
     n_dims = int(np.prod(observations.shape[1:]))
@@ -277,7 +292,7 @@ def tile_indices(
     :param origin: ``"low"`` or ``"zero"``, see ``tile_coordinates``
     :return: indices, shape (batch, n_tilings), int64, in [0, n_tilings × Π(tiles_per_dim + 1)) (dense, origin
         ``"low"``) or [0, hash_size)
-    :raises ValueError: if an argument is out of its domain (the message names it)
+    :raises ValueError: if an argument is out of its domain (the message names it), or an observation holds NaN
     """
     observations = th.as_tensor(observations)
     n_dims = int(np.prod(observations.shape[1:]))
@@ -417,6 +432,8 @@ class TileCoding(BaseFeaturesExtractor):
         batch = len(observations)
         # np.clip's result, without its dispatch (each NumPy call on one observation costs more than its arithmetic)
         x = np.minimum(np.maximum(observations.reshape(batch, -1).astype(np.float64), grid["low"]), grid["high"])
+        if np.isnan(x).any():  # (NaN survives the clip, and its tile index would be garbage)
+            raise ValueError(_nan_message(x))
         # As _coordinates: f = tiles_per_dim·(x − origin)/(high − low), q = ⌊f·n_tilings⌋, c = ⌊(q + t(2d+1))/n_tilings⌋
         quantized = np.floor(grid["tiles_per_dim"] * (x - grid["origin"]) / grid["width"] * self.n_tilings).astype(np.int64)
         from_first = (quantized[:, None, :] + grid["offsets_from_first"]) // self.n_tilings

@@ -6,15 +6,23 @@ import numpy as np
 from gymnasium import Env, spaces
 
 
+def _check_n_states(n_states: int) -> None:
+    """:raises ValueError: unless ``n_states`` is an odd integer >= 1 (the walk starts in the middle state)"""
+    if isinstance(n_states, bool) or not isinstance(n_states, int | np.integer) or n_states < 1 or n_states % 2 == 0:
+        raise ValueError(f"n_states={n_states!r} must be an odd integer >= 1 (19 in Example 7.1), so that it has a middle")
+
+
 def random_walk_true_values(n_states: int = 19) -> np.ndarray:
     """
     The true values of the random walk with rewards −1 at the left exit and +1 at the right (γ = 1): v(s) is
     P(right exit) − P(left exit) = 2s/(n + 1) − 1. For the 19 states of Example 7.1: v(s) = (s − 10)/10,
     i.e. −0.9, −0.8, …, 0.9.
 
-    :param n_states: number of non-terminal states n (odd)
+    :param n_states: number of non-terminal states n (odd, as ``RandomWalkEnv``'s)
     :return: v(1), …, v(n), shape (n_states,), float64 (index s − 1 holds state s)
+    :raises ValueError: for a count ``RandomWalkEnv`` refuses
     """
+    _check_n_states(n_states)
     states = np.arange(1, n_states + 1)
     return 2 * states / (n_states + 1) - 1
 
@@ -44,8 +52,7 @@ class RandomWalkEnv(Env[np.ndarray, np.int64]):
     metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012 (gymnasium's class attribute)
 
     def __init__(self, n_states: int = 19, render_mode: str | None = None) -> None:
-        if isinstance(n_states, bool) or not isinstance(n_states, int | np.integer) or n_states < 1 or n_states % 2 == 0:
-            raise ValueError(f"n_states={n_states!r} must be an odd integer >= 1 (19 in Example 7.1), so that it has a middle")
+        _check_n_states(n_states)
         if render_mode is not None:
             # A TypeError, as for an argument the env does not take: SB3's maybe_make_env asks for "rgb_array" and
             # falls back to gym.make(env_id) on it, so that NStepSARSA("MlpPolicy", env_id) works

@@ -369,8 +369,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         deterministic: bool = False,
     ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
         """
-        The greedy action (``deterministic=True``), or the ε-greedy one with the current ``exploration_rate``, as the
-        env takes it (an index plus the ``start`` of a ``Discrete(n, start=...)`` space). Greedy in the weight average
+        The greedy action (``deterministic=True``: the first of tied ones), or the ε-greedy one with the current
+        ``exploration_rate``, whose greedy action breaks ties at random as the behaviour policy does; as the env takes
+        it (an index plus the ``start`` of a ``Discrete(n, start=...)`` space). Greedy in the weight average
         ``policy.q_net_average`` with ``averaging_tau``, else in q̂.
 
         :param observation: the input observation (one, or a batch)
@@ -380,7 +381,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         :return: the actions, and the unchanged state
         """
         # In the env's action values (the space's start added), as the ε-greedy draw
-        actions, state = self.policy.predict(observation, state, episode_start, deterministic=True)
+        actions, state = self.policy.predict(observation, state, episode_start, deterministic=deterministic)
         return (actions if deterministic else self._epsilon_greedy(actions, int(self.action_space.start))), state
 
     def _bootstrap_values(self, q_values: th.Tensor) -> np.ndarray:

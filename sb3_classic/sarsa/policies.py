@@ -19,6 +19,7 @@ from stable_baselines3.dqn.policies import QNetwork
 from torch import nn
 
 from sb3_classic.common.policies import MODE_DEPENDENT_MODULES, EnvActionsMixin
+from sb3_classic.common.returns import greedy_random_ties
 from sb3_classic.common.torch_layers import (
     check_constant_init_is_linear,
     check_net_arch,
@@ -36,7 +37,8 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
     The action-value network q̂(s, a, w) of semi-gradient SARSA (Sutton & Barto §10.1–10.2), with its optimizer.
     It is SB3's DQN ``QNetwork`` without a target network: SARSA bootstraps from the online network.
     ``predict`` is greedy, in the env's action values (``start`` of the ``Discrete`` space added; q̂'s outputs are
-    indexed from 0); the ε-greedy behaviour policy lives in ``NStepSARSA``, as ε is training state.
+    indexed from 0), with ties broken at random unless ``deterministic=True``; the ε-greedy behaviour policy lives in
+    ``NStepSARSA``, as ε is training state.
 
     :param observation_space: observation space
     :param action_space: action space (Discrete)
@@ -196,7 +198,17 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         return self.q_net if self.q_net_average is None else self.q_net_average
 
     def _predict(self, observation: PyTorchObs, deterministic: bool = True) -> th.Tensor:
-        return self.greedy_net._predict(observation, deterministic=deterministic)
+        """
+        :param observation: the observations
+        :param deterministic: the first of tied greedy actions (reproducible); False: one of them at random, as the
+            behaviour policy breaks ties (``greedy_random_ties``, NumPy's global RNG): a q̂ of zeros (the book's
+            Mountain Car) would otherwise always pick action 0
+        :return: the greedy actions argmax_a q̂(obs, a) of ``greedy_net``
+        """
+        if deterministic:
+            return self.greedy_net._predict(observation, deterministic=True)
+        q_values = self.greedy_net(observation)
+        return th.as_tensor(greedy_random_ties(q_values.cpu().numpy()), device=q_values.device)
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = super()._get_constructor_parameters()
