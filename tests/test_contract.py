@@ -282,6 +282,17 @@ def test_tensorboard_event_files_hold_the_logged_keys(model_class: type[BaseAlgo
 
 
 @pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_the_episode_count_is_logged_as_dqn_logs_it(model_class: type[BaseAlgorithm], tmp_path: Path) -> None:
+    # time/episodes (SB3's DQN's key) was missing: a user switching from DQN got no curve
+    model = make_model(model_class, env=make_vec_env("CartPole-v1", n_envs=2), seed=0)
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    model.learn(1500, log_interval=1)
+    rows = (tmp_path / "progress.csv").read_text().splitlines()
+    header, last = rows[0].split(","), rows[-1].split(",")
+    assert int(float(last[header.index("time/episodes")])) == model._completed_episodes > 10
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
 def test_seeded_runs_are_reproducible(model_class: type[BaseAlgorithm]) -> None:
     def trained(seed: int) -> dict[str, Any]:
         return make_model(model_class, env=make_vec_env("CartPole-v1", n_envs=2), seed=seed).learn(600).get_parameters()

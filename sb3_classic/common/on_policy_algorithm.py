@@ -624,6 +624,16 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         callback.on_training_end()
         return self
 
+    def dump_logs(self, iteration: int = 0) -> None:
+        """
+        SB3's ``OnPolicyAlgorithm.dump_logs``, with ``time/episodes``: the episodes completed so far, all envs
+        together, as SB3's DQN logs it (the count the episode-based decays use).
+
+        :param iteration: the rollouts so far in this ``learn()`` call (``time/iterations``)
+        """
+        self.logger.record("time/episodes", self._completed_episodes, exclude="tensorboard")
+        super().dump_logs(iteration)
+
     def _log_interval_choices(self) -> str:
         """:return: the values of ``learn(log_interval=...)`` beyond a count and None, for its error message"""
         return ""
