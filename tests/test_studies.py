@@ -698,13 +698,20 @@ def test_the_compute_counts_each_shared_run_once(tmp_path: Path) -> None:
     record("two", {"shared": 1800.0, "own-2": 1800.0})
     index = outputs.write_studies_index([], tmp_path).read_text()
     assert "Compute: 3 distinct runs, 2.0 CPU hours" in index
-    # A folder of reduced runs counts those, and its commands show their budget
+    assert index.startswith("# Studies\n")
+    # A folder of full and reduced results (--results-dir given to both) says so, and counts both: it was titled
+    # "(reduced runs)" by a reduced command, and counted only that command's kind; the commands show the budget
     record("one", {"quick": 360.0})
     (tmp_path / "one.json").write_text(json.dumps(json.loads((tmp_path / "one.json").read_text()) | {"reduced": True}))
     study = load_study(write_study(tmp_path, TINY, "one.yml"))
+    mixed = outputs.write_studies_index([study], tmp_path, extra=["--seeds", "2"], reduced=True).read_text()
+    assert mixed.startswith("# Studies (full and reduced runs: the reduced ones are marked)\n")
+    assert "Compute: 3 distinct runs (1 of them of reduced runs), 1.1 CPU hours" in mixed
+    assert "one.yml --seeds 2`" in mixed
+    (tmp_path / "two.json").unlink()
     reduced = outputs.write_studies_index([study], tmp_path, extra=["--seeds", "2"], reduced=True).read_text()
+    assert reduced.startswith("# Studies (reduced runs)\n")
     assert "Compute: 1 distinct run, 0.1 CPU hours" in reduced
-    assert "one.yml --seeds 2`" in reduced
 
 
 # ---- the command, end to end ---------------------------------------------------------------------------------------

@@ -219,8 +219,7 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
         catalogue += [
             study for study in map(load_study, sorted(defaults.catalogue.glob("*.yml"))) if study.name not in shipped
         ]
-    title = "Studies" + (" (reduced runs)" if reduced else "")
-    index = write_studies_index(catalogue, results_dir, title, defaults.program, defaults.root, budget, reduced)
+    index = write_studies_index(catalogue, results_dir, "Studies", defaults.program, defaults.root, budget, reduced)
     console.print(f"wrote {index}", highlight=False)
     return report_missing(missing, console, ran=not args.report_only)
 

@@ -354,7 +354,7 @@ def write_studies_index(
     :param program: the module of the commands shown (``study_command``)
     :param root: the folder they run in (``study_command``)
     :param extra: the options of the commands shown (``study_command``: a reduced run's budget)
-    :param reduced: whether ``results_dir`` holds reduced runs (their compute is counted, not the studies')
+    :param reduced: whether this command's runs are reduced (the title's, where the folder has no results yet)
     :return: its path
     """
     records: dict[str, dict[str, Any]] = {}
@@ -372,12 +372,21 @@ def write_studies_index(
     for name, record in records.items():
         if name not in listed:
             rows += _claim_rows(name, record.get("source", ""), record["claim_texts"], record, record["command"])
-    done = [record for record in records.values() if bool(record.get("reduced")) == reduced]
-    # Each distinct run once: studies (and readings) that share settings share their runs
+    # Each distinct run once: studies (and readings) that share settings share their runs. A folder may hold the
+    # results of full and of reduced runs (--results-dir given to both): the title and the compute say which
     run_seconds: dict[str, float] = {}
-    for record in done:
+    reduced_runs: set[str] = set()
+    for record in records.values():
         run_seconds.update(record.get("run_seconds", {}))
+        if record.get("reduced"):
+            reduced_runs.update(record.get("run_seconds", {}))
     runs, hours = len(run_seconds), math.fsum(run_seconds.values()) / 3600
+    kinds = {bool(record.get("reduced")) for record in records.values()} or {reduced}
+    if title == "Studies" and kinds == {True}:
+        title += " (reduced runs)"
+    elif title == "Studies" and kinds == {True, False}:
+        title += " (full and reduced runs: the reduced ones are marked)"
+    of_reduced = f" ({len(reduced_runs)} of them of reduced runs)" if reduced_runs and len(kinds) > 1 else ""
     counts: dict[str, int] = {}
     for row in rows:
         verdict = row[3].split(" (")[0]
@@ -398,7 +407,7 @@ def write_studies_index(
             if set(records) - listed
             else "."
         ),
-        f"Compute: {runs} distinct {plural(runs, 'run', 'runs')}, {hours:.1f} CPU hours (`learn()` and the final "
+        f"Compute: {runs} distinct {plural(runs, 'run', 'runs')}{of_reduced}, {hours:.1f} CPU hours (`learn()` and the final "
         "evaluation, one core per run), "
         "summed over the studies' results in this folder, each run once (they may come from several invocations: the "
         "cache resumes).",
