@@ -131,7 +131,13 @@ def make_specs(
 
 
 def learning_header(
-    command: str, settings: Settings, env_ids: Sequence[str], algos: Sequence[str], workers: int, scheduler: str | None = None
+    command: str,
+    settings: Settings,
+    env_ids: Sequence[str],
+    algos: Sequence[str],
+    workers: int,
+    scheduler: str | None = None,
+    ran: int | None = None,
 ) -> str:
     """
     :param command: the command line
@@ -140,16 +146,22 @@ def learning_header(
     :param algos: its algorithms
     :param workers: the runs in parallel on this machine (without ``scheduler``)
     :param scheduler: the Dask scheduler the runs were sent to, if any
+    :param ran: how many of the runs this command trained (the rest came from the cache); None: all of them
     :return: the markdown above the learning tables: the command, the settings and how to read the columns
     """
     budgets = ", ".join(f"{env_id} {settings.budgets[env_id]:,}" for env_id in env_ids)
     ours = [LABELS[algo] for algo in algos if algo in OUR_ALGOS]
     peers = [LABELS[algo] for algo in algos if algo not in OUR_ALGOS]
     versions = ", ".join(f"{name} {version}" for name, version in code_versions("reinforce").items())
-    if scheduler is None:
+    if ran == 0:
+        # A report from the cache: this command's --workers and machine are not those the runs had
+        where = "Every run was in the cache (`--cache-dir`): this command trained none of them, torch 1 thread each."
+    elif scheduler is None:
         where = f"{workers} runs in parallel, torch 1 thread each, CPU ({platform.machine()}, {os.cpu_count()} cores)."
     else:
         where = "Runs on a Dask cluster (`--scheduler`), torch 1 thread each."
+    if ran:
+        where += f" This command trained {ran} of the runs; the rest were in the cache."
     return f"""# Learning benchmarks
 
 Produced by:
@@ -288,7 +300,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     if results.runs.empty:
         return report_missing(results.missing, console)
-    header = learning_header(command, settings, args.envs, args.algos, args.workers, args.scheduler)
+    ran = None if len(pending) == len(specs) else len({spec.key() for spec in pending})
+    header = learning_header(command, settings, args.envs, args.algos, args.workers, args.scheduler, ran)
     path = write_learning_report(results, args.envs, args.algos, header, results_dir, footer=hyperparams_section(specs))
     crossings = threshold_crossings(results)
     for env_id in args.envs:

@@ -31,7 +31,7 @@ from benchmarks.report import (
     summary_table,
     threshold_crossings,
 )
-from benchmarks.run import FULL, QUICK, main, make_specs, parse_budgets
+from benchmarks.run import FULL, QUICK, learning_header, main, make_specs, parse_budgets
 from benchmarks.throughput import (
     build_model,
     measure,
@@ -490,6 +490,17 @@ def test_benchmark_set_values_the_algorithm_rejects_stop_before_any_run(
     assert "Nothing was run: the algorithm rejects these --set values" in output
     assert "reinforce on CartPole-v1: ValueError: update_mode='perstep'" in output
     assert not (tmp_path / "cache").exists()
+
+
+def test_a_report_from_the_cache_does_not_claim_this_commands_workers() -> None:
+    # A rerun that trained nothing wrote its own --workers (and machine) as the runs'
+    def header(ran: int | None) -> str:
+        return learning_header("python -m benchmarks.run", FULL, ["CartPole-v1"], ["reinforce"], 7, ran=ran)
+
+    assert "7 runs in parallel" in header(None)
+    assert "7 runs in parallel" not in header(0)
+    assert "Every run was in the cache (`--cache-dir`): this command trained none of them" in header(0)
+    assert "This command trained 3 of the runs; the rest were in the cache." in header(3)
 
 
 def test_an_interruption_stops_the_running_runs_at_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
