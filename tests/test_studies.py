@@ -572,6 +572,10 @@ def test_variants_that_are_the_same_run_are_refused(tmp_path: Path) -> None:
         load_study(write_study(tmp_path, text))
     # A variant that differs in one setting is another run
     load_study(write_study(tmp_path, text.replace("learning_rate: 0.001}", "learning_rate: 0.002}"), "other.yml"))
+    # One that writes out the algorithm's default (NStepSARSA's n_steps=3) is the same run as one that leaves it out
+    default = TINY.replace("  n3: {n_steps: 3,", "  base: {}\n  three: {n_steps: 3}\n  n3: {n_steps: 3,")
+    with pytest.raises(StudyError, match=r"variants.three: the same run as variant 'base'"):
+        load_study(write_study(tmp_path, default, "default.yml"))
 
 
 def test_a_step_budget_is_refused_where_a_claim_counts_episodes(tmp_path: Path) -> None:

@@ -31,6 +31,7 @@ The format (the README of the repository's ``benchmarks/studies/`` has the long 
 
 import dataclasses
 import difflib
+import inspect
 import math
 from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -42,6 +43,7 @@ import rl_zoo3
 import yaml
 
 from sb3_classic.harness.common import THRESHOLDS, RunSpec, register_algorithms, unknown_setting
+from sb3_classic.zoo import ALGORITHMS
 
 METRICS = ("mean_return", "last_100_return", "episodes_to_threshold")
 CLAIM_KINDS = ("better", "similar", "reaches", "below")
@@ -464,12 +466,20 @@ def load_study(path: Path | str) -> StudySpec:
 def _check_distinct_variants(check: _Checker, study: StudySpec) -> None:
     """
     Refuse variants that are the same run as the file states them (e.g. ``same: {learning_rate: 0.003}`` beside
-    a base of 0.003): each would be compared with the other as if they differed, and a claim between them decided on
-    noise. (A variant that writes out a default value is a different entry, so not caught: its runs are other runs.)
+    a base of 0.003), also where one writes out the algorithm's default (``n_steps: 3`` for NStepSARSA's, beside a
+    base without it): each would be compared with the other as if they differed, and a claim between them decided on
+    two copies of one run. (Defaults inside ``policy_kwargs`` are not filled in.)
     """
+    defaults = {
+        name: parameter.default
+        for name, parameter in inspect.signature(ALGORITHMS[study.algo].__init__).parameters.items()
+        if parameter.default is not inspect.Parameter.empty
+    } | {"n_envs": 1}  # (rl-zoo3's default)
     seen: dict[str, str] = {}
     for name in study.variants:
-        entry = yaml.safe_dump(study.zoo_entry(name), sort_keys=True)
+        stated = study.zoo_entry(name)
+        without_defaults = {key: value for key, value in stated.items() if key not in defaults or value != defaults[key]}
+        entry = yaml.safe_dump(without_defaults, sort_keys=True)
         if entry in seen:
             check.fail(
                 f"variants.{name}",
