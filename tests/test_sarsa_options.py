@@ -9,8 +9,10 @@ from typing import Any
 import numpy as np
 import pytest
 import torch as th
+from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
 from sb3_classic import NStepSARSA
@@ -215,3 +217,43 @@ def test_a_linear_epsilon_restarts_with_each_learn_from_its_first_step() -> None
     model.learn(400, callback=FirstSteps())
     # The whole first rollout (16 steps) of the second call explores as the first call started, as SB3's DQN
     assert seen[:16] == [model.exploration_initial_eps] * 16
+
+
+class BatchNormExtractor(BaseFeaturesExtractor):
+    """A features extractor with running statistics (BatchNorm), which are buffers, not parameters."""
+
+    def __init__(self, observation_space: spaces.Box) -> None:
+        super().__init__(observation_space, features_dim=8)
+        self.net = nn.Sequential(nn.Linear(4, 8), nn.BatchNorm1d(8), nn.ReLU())
+
+    def forward(self, observations: th.Tensor) -> th.Tensor:
+        return self.net(observations)
+
+
+def test_the_bootstrap_copy_and_the_average_take_the_running_statistics() -> None:
+    # They stayed at their initial 0 and 1 (the copies moved only the parameters), so that with τ = 1 the average,
+    # which every evaluation uses, normalised otherwise than q̂; SB3's DQN copies them to its target network
+    model = NStepSARSA(
+        "MlpPolicy",
+        "CartPole-v1",
+        target_update_interval=1,
+        averaging_tau=1.0,
+        policy_kwargs=dict(features_extractor_class=BatchNormExtractor),
+        seed=0,
+        device="cpu",
+    )
+    model.learn(500)
+    statistics = {name: value for name, value in model.policy.q_net.state_dict().items() if "running_" in name}
+    assert statistics
+    assert all(value.abs().sum() > 0 for name, value in statistics.items() if "mean" in name)
+    for copy in (model.policy.q_net_target, model.policy.q_net_average):
+        assert copy is not None
+        copied = copy.state_dict()
+        for name, value in statistics.items():
+            th.testing.assert_close(copied[name], value, rtol=0, atol=0)
+    obs = th.as_tensor(np.stack([model.observation_space.sample() for _ in range(5)]))
+    model.policy.set_training_mode(False)
+    average = model.policy.q_net_average
+    assert average is not None
+    with th.no_grad():
+        th.testing.assert_close(average(obs), model.policy.q_net(obs))

@@ -1,4 +1,5 @@
 import math
+import weakref
 from collections.abc import Callable, Sequence
 from typing import Any, ClassVar, Literal, TypeVar
 
@@ -8,7 +9,7 @@ import torch.nn.functional as F
 from gymnasium import spaces
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor, polyak_update
+from stable_baselines3.common.utils import LinearSchedule, get_parameters_by_name, obs_as_tensor, polyak_update
 
 from sb3_classic.common.buffers import TrainingBatch, select
 from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
@@ -25,6 +26,30 @@ from sb3_classic.common.utils import check_bool, check_choice, check_positive_in
 from sb3_classic.sarsa.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, SARSAPolicy
 
 SelfNStepSARSA = TypeVar("SelfNStepSARSA", bound="NStepSARSA")
+
+
+def _polyak_update(source: th.nn.Module, copy: th.nn.Module, tau: float) -> None:
+    """
+    w' ← τ w + (1 − τ) w' of the parameters (SB3's ``polyak_update``), and the running statistics of normalisation
+    layers (BatchNorm's ``running_mean``, ``running_var``) copied, as SB3's DQN copies them to its target network:
+    they are not parameters, and a copy whose statistics never moved normalises otherwise.
+
+    :param source: q̂'s network
+    :param copy: the bootstrap copy or the weight average
+    :param tau: the coefficient τ
+    """
+    polyak_update(source.parameters(), copy.parameters(), tau)
+    if copy not in _HAS_STATISTICS:
+        # Asked once per copy: a state_dict walk at every update costs more than the update of a small q̂
+        _HAS_STATISTICS[copy] = bool(get_parameters_by_name(copy, ["running_"]))
+    if _HAS_STATISTICS[copy]:
+        # (Looked up each time: module.to() replaces buffers by new tensors)
+        polyak_update(get_parameters_by_name(source, ["running_"]), get_parameters_by_name(copy, ["running_"]), 1.0)
+
+
+#: Per bootstrap copy or weight average: whether it has running statistics (its structure does not change)
+_HAS_STATISTICS: "weakref.WeakKeyDictionary[th.nn.Module, bool]" = weakref.WeakKeyDictionary()
+
 
 # The linear ε schedule's, when exploration_fraction is None (SB3's DQN's default)
 DEFAULT_EXPLORATION_FRACTION = 0.1
@@ -664,7 +689,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         target = self.policy.q_net_target
         if target is not None and self.num_timesteps - self._target_updated_at >= (self.target_update_interval or 0):
             # w⁻ ← τ w + (1 − τ) w⁻ (SB3's DQN; not in the book)
-            polyak_update(self.policy.q_net.parameters(), target.parameters(), self.tau)
+            _polyak_update(self.policy.q_net, target, self.tau)
             self._target_updated_at = self.num_timesteps
         self._update_average()
         self._n_updates += self.gradient_steps * len(chunks)
@@ -676,7 +701,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         average = self.policy.q_net_average
         if average is not None and self.averaging_tau is not None:
             # w̄ ← τ w + (1 − τ) w̄ (SB3's polyak_update; not in the book)
-            polyak_update(self.policy.q_net.parameters(), average.parameters(), self.averaging_tau)
+            _polyak_update(self.policy.q_net, average, self.averaging_tau)
 
     def _record_update(self, loss: th.Tensor, q_predicted: th.Tensor, targets: th.Tensor) -> None:
         """
