@@ -7,10 +7,13 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.distributions import Distribution
 from stable_baselines3.common.envs import IdentityEnvBox, SimpleMultiObsEnv
 
 from sb3_classic import REINFORCE, NStepSARSA
 from sb3_classic.common.torch_layers import optimizer_kwargs_with_defaults
+from sb3_classic.reinforce.policies import REINFORCEPolicy
 
 MODEL_LIST = [REINFORCE, NStepSARSA]
 
@@ -94,3 +97,31 @@ def test_reinforce_samples_as_sb3_distributions_do(env: Any, policy: str, policy
         assert th.equal(ours, sb3)
         draws.add(ours.numpy().tobytes())
     assert len(draws) > 1  # random, not the greedy action
+
+
+class NeverAction1(REINFORCEPolicy):
+    """A policy that masks action 1 through SB3's hook of the action distribution (as action masking does)."""
+
+    def _get_action_dist_from_latent(self, latent_pi: th.Tensor) -> Distribution:
+        logits = self.action_net(latent_pi)
+        mask = th.zeros_like(logits)
+        mask[:, 1] = -1e9
+        return self.action_dist.proba_distribution(action_logits=logits + mask)
+
+
+def test_reinforce_rollouts_draw_from_a_subclass_distribution() -> None:
+    # The rollout's fast draw rebuilt the logits itself: it took action 1 about half the time, which the policy gives
+    # probability e^-1e9 (A2C's rollouts honour the hook)
+    taken: list[int] = []
+
+    class Actions(BaseCallback):
+        def _on_step(self) -> bool:
+            taken.extend(np.asarray(self.locals["actions"]).ravel().tolist())
+            return True
+
+    model = REINFORCE(NeverAction1, "CartPole-v1", seed=0, device="cpu")
+    model.learn(300, callback=Actions())
+    assert len(taken) >= 300
+    assert set(taken) == {0}
+    assert not model.policy._sb3_distribution
+    assert REINFORCE("MlpPolicy", "CartPole-v1", device="cpu").policy._sb3_distribution

@@ -178,15 +178,16 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
 
     def sample_actions(self, obs: PyTorchObs) -> th.Tensor:
         """
-        A ~ π(·|obs, θ), the behaviour policy of the rollout loop. For Discrete actions this is the draw
+        A ~ π(·|obs, θ), the behaviour policy of the rollout loop: a draw from ``get_distribution(obs)``. For Discrete
+        actions, where a subclass overrides none of SB3's hooks of that distribution, this is the draw
         ``CategoricalDistribution.sample()`` makes (the same ``multinomial`` call on the soft-max of the logits),
         without building a ``torch.distributions`` object at every env step, which is most of the per-step cost
-        of SB3's ``get_distribution``; other action spaces use SB3's distributions.
+        of SB3's ``get_distribution``; otherwise (other action spaces, a subclass that masks actions) SB3's.
 
         :param obs: the observations of all envs
         :return: one action per env
         """
-        if not isinstance(self.action_dist, CategoricalDistribution):
+        if not (isinstance(self.action_dist, CategoricalDistribution) and self._sb3_distribution):
             return self.get_distribution(obs).get_actions()
         features = BaseModel.extract_features(self, obs, self.pi_features_extractor)
         logits = self.action_net(self.mlp_extractor.forward_actor(features))
@@ -200,6 +201,12 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         """
         if self.training != mode:
             super().set_training_mode(mode)
+
+    @property
+    def _sb3_distribution(self) -> bool:
+        """Whether the action distribution is SB3's own: no subclass overrides a hook ``get_distribution`` calls."""
+        hooks = ("get_distribution", "_get_action_dist_from_latent", "extract_features")
+        return all(getattr(type(self), hook) is getattr(REINFORCEPolicy, hook) for hook in hooks)
 
     @property
     def value_parameters(self) -> list[nn.Parameter]:
