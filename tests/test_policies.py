@@ -10,6 +10,7 @@ import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.distributions import Distribution
 from stable_baselines3.common.envs import IdentityEnvBox, SimpleMultiObsEnv
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
 from sb3_classic import REINFORCE, NStepSARSA
 from sb3_classic.common.torch_layers import optimizer_kwargs_with_defaults
@@ -125,3 +126,49 @@ def test_reinforce_rollouts_draw_from_a_subclass_distribution() -> None:
     assert set(taken) == {0}
     assert not model.policy._sb3_distribution
     assert REINFORCE("MlpPolicy", "CartPole-v1", device="cpu").policy._sb3_distribution
+
+
+class PretrainedExtractor(BaseFeaturesExtractor):
+    """A features extractor of the user's, built with weights of its own (pretrained ones, say)."""
+
+    def __init__(self, observation_space: gym.spaces.Box) -> None:
+        super().__init__(observation_space, features_dim=8)
+        self.layer = th.nn.Linear(4, 8)
+        with th.no_grad():
+            self.layer.weight.fill_(0.01)
+            self.layer.bias.fill_(0.5)
+
+    def forward(self, observations: th.Tensor) -> th.Tensor:
+        return th.relu(self.layer(observations))
+
+
+@pytest.mark.parametrize(
+    ("model_class", "kwargs"),
+    [
+        (NStepSARSA, {}),  # the default weight_init="kaiming"
+        (NStepSARSA, dict(weight_init="orthogonal")),
+        (NStepSARSA, dict(with_bias=False)),
+        (REINFORCE, dict(weight_init="kaiming")),
+        (REINFORCE, dict(with_bias=False, weight_init="default")),
+        (NStepSARSA, dict(net_arch=[], weight_init=0.0)),
+        (REINFORCE, dict(net_arch=[], weight_init=0.0)),
+    ],
+)
+def test_a_users_features_extractor_keeps_its_weights(model_class: type[Any], kwargs: dict[str, Any]) -> None:
+    # SARSA's default Kaiming scheme re-initialised it (DQN leaves it alone), REINFORCE's with_bias=False removed its
+    # biases, and a constant weight_init was refused for its layer
+    policy_kwargs = dict(features_extractor_class=PretrainedExtractor, **kwargs)
+    model = model_class("MlpPolicy", "CartPole-v1", policy_kwargs=policy_kwargs, device="cpu")
+    extractors = [module for module in model.policy.modules() if isinstance(module, PretrainedExtractor)]
+    assert extractors
+    for extractor in extractors:
+        assert th.all(extractor.layer.weight == 0.01)
+        assert extractor.layer.bias is not None
+        assert th.all(extractor.layer.bias == 0.5)
+    # The networks built here do take the scheme: no bias anywhere else, or the constant
+    others = [layer for layer in model.policy.modules() if isinstance(layer, th.nn.Linear)]
+    others = [layer for layer in others if not any(layer is extractor.layer for extractor in extractors)]
+    if kwargs.get("with_bias") is False:
+        assert all(layer.bias is None for layer in others)
+    if kwargs.get("weight_init") == 0.0:
+        assert all(th.all(layer.weight == 0.0) for layer in others)

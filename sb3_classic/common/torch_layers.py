@@ -167,22 +167,36 @@ def constant_init(modules: Iterable[nn.Module], value: float) -> None:
                     nn.init.zeros_(layer.bias)
 
 
-def remove_biases(module: nn.Module) -> None:
+def is_library_extractor(extractor: nn.Module) -> bool:
+    """
+    :param extractor: a policy's features extractor
+    :return: whether its class is SB3's or this package's (``FlattenExtractor``, ``NatureCNN``, ``CombinedExtractor``,
+        ``TileCoding``): the initialisation schemes and ``with_bias=False`` apply to those, not to a class of the
+        user's, which keeps the weights and biases it was built with (pretrained ones, say), as SB3's DQN keeps them
+    """
+    return type(extractor).__module__.startswith(("stable_baselines3.", "sb3_classic."))
+
+
+def remove_biases(module: nn.Module, keep: Iterable[nn.Module] = ()) -> None:
     """
     Replace every ``nn.Linear`` inside ``module`` by one without bias, in place (same weights). A linear q̂(s, a, w) =
     wᵀx(s, a) of the book has no bias term (S&B eq. 9.8): with one-hot or tile features a bias would be one more
     feature active in every state, coupling all states' values.
 
-    :param module: the network (SB3's ``QNetwork.q_net``, ``MlpExtractor``, ``action_net``, ...)
+    :param module: the network (SB3's ``QNetwork.q_net``, ``MlpExtractor``, a policy holding ``action_net``, ...)
+    :param keep: submodules to leave as they are (a features extractor of the user's)
     """
+    keep = list(keep)
     for name, child in module.named_children():
+        if any(child is kept for kept in keep):
+            continue
         if isinstance(child, nn.Linear) and child.bias is not None:
             linear = nn.Linear(child.in_features, child.out_features, bias=False, device=child.weight.device)
             with th.no_grad():
                 linear.weight.copy_(child.weight)
             setattr(module, name, linear)
         else:
-            remove_biases(child)
+            remove_biases(child, keep)
 
 
 def optimizer_kwargs_with_defaults(

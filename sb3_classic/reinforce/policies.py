@@ -16,6 +16,7 @@ from sb3_classic.common.torch_layers import (
     check_net_arch,
     check_weight_init,
     constant_init,
+    is_library_extractor,
     kaiming_init,
     make_activation,
     optimizer_kwargs_with_defaults,
@@ -111,13 +112,18 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
             self.value_net = nn.Sequential()  # type: ignore[assignment]
             if not share_features_extractor:
                 self.vf_features_extractor = self.pi_features_extractor
+        # The networks built here, and SB3's or this package's features extractors: one of the user's keeps the weights
+        # and biases it was built with (SB3's orthogonal scheme, A2C's, re-initialises it as in A2C)
+        extractors = {self.pi_features_extractor, self.vf_features_extractor}
         if not with_bias:
-            remove_biases(self)
-        check_constant_init_is_linear(weight_init, [self], [self.action_net, self.value_net])
+            remove_biases(self, keep=[extractor for extractor in extractors if not is_library_extractor(extractor)])
+        # (after remove_biases, which replaces action_net and value_net)
+        built = [self.mlp_extractor, self.action_net, self.value_net, *filter(is_library_extractor, extractors)]
+        check_constant_init_is_linear(weight_init, built, [self.action_net, self.value_net])
         if not isinstance(weight_init, str):
-            constant_init([self], weight_init)
+            constant_init(built, weight_init)
         elif weight_init == "kaiming":
-            hidden = {self.pi_features_extractor, self.vf_features_extractor, self.mlp_extractor}
+            hidden = {self.mlp_extractor, *filter(is_library_extractor, extractors)}
             kaiming_init(hidden, activation_fn, activation_kwargs)
 
         # Two optimizers instead of ActorCriticPolicy's one: α^θ for the policy network, α^w for the value network

@@ -25,6 +25,7 @@ from sb3_classic.common.torch_layers import (
     check_net_arch,
     check_weight_init,
     constant_init,
+    is_library_extractor,
     kaiming_init,
     make_activation,
     optimizer_kwargs_with_defaults,
@@ -142,10 +143,12 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             )
             self.q_net.q_net = nn.Sequential(*mlp)
         layers = list(self.q_net.q_net)
-        hidden, output = [features_extractor, *layers[:-1]], layers[-1]
-        check_constant_init_is_linear(weight_init, [self.q_net], [output])
+        # (a features extractor of the user's keeps the initialisation it was built with)
+        own = [features_extractor] if is_library_extractor(features_extractor) else []
+        hidden, output = [*own, *layers[:-1]], layers[-1]
+        check_constant_init_is_linear(weight_init, [*own, self.q_net.q_net], [output])
         if not isinstance(weight_init, str):
-            constant_init([self.q_net], weight_init)
+            constant_init([*own, self.q_net.q_net], weight_init)
         elif weight_init == "kaiming":
             kaiming_init(hidden, activation_fn, activation_kwargs)
         elif weight_init == "orthogonal":
