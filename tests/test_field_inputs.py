@@ -477,8 +477,9 @@ class Corrupt(gym.Wrapper[np.ndarray, Any, np.ndarray, Any]):
     Returns NaN or infinity in one field at one step of its life (counted over episodes).
 
     :param env: the env to wrap
-    :param field: ``"observation"``, ``"reward"``, ``"final observation"`` (the step also terminates the episode)
-        or ``"reset"`` (the first observation)
+    :param field: ``"observation"``, ``"reward"``, ``"final observation"`` (the step also truncates the episode, so
+        that its target bootstraps from it), ``"terminal observation"`` (the step terminates it: nothing bootstraps from
+        it) or ``"reset"`` (the first observation)
     :param at_step: the step (1-based, over the env's life) that returns the bad value
     :param value: NaN or ±inf
     """
@@ -500,10 +501,11 @@ class Corrupt(gym.Wrapper[np.ndarray, Any, np.ndarray, Any]):
         if self.steps == self.at_step:
             if self.field == "reward":
                 reward = self.value
-            elif self.field in ("observation", "final observation"):
+            elif self.field in ("observation", "final observation", "terminal observation"):
                 obs = obs.copy()
                 obs[1] = self.value
-                terminated = terminated or self.field == "final observation"
+                truncated = truncated or self.field == "final observation"
+                terminated = terminated or self.field == "terminal observation"
         return obs, reward, terminated, truncated, info
 
 
@@ -551,13 +553,92 @@ def test_a_bad_value_stops_training_before_any_update(
     before = cloned_parameters(model)
     with pytest.raises(ValueError, match=message) as error:
         model.learn(2000)
-    assert "VecCheckNan" in str(error.value)
+    # VecCheckNan finds what step() returns, not a final observation in the infos (which it was told to use)
+    assert ("VecCheckNan" in str(error.value)) == (field != "final observation")
     assert parameters_equal(model.get_parameters(), before)
     # The model can be saved, and trains on once the env is fixed
     model.save(tmp_path / "model")
     loaded = model_class.load(tmp_path / "model", env=make_vec_env("CartPole-v1", n_envs=2, seed=0), device="cpu")
     assert parameters_equal(loaded.get_parameters(), before)
     loaded.learn(200)
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_a_terminations_final_observation_is_not_bootstrapped_so_not_refused(model_class: type[BaseAlgorithm]) -> None:
+    # A simulator that diverges into NaN as it terminates: no target uses that state, and A2C and DQN train on
+    model = make_model(model_class, corrupted_env("terminal observation", at_step=5), seed=0)
+    model.learn(300)
+    assert model._n_updates > 0
+
+
+class FinalObservationOfShape(gym.Wrapper[np.ndarray, Any, np.ndarray, Any]):
+    """Truncates its 4th step with a final observation of another shape than its space's."""
+
+    def __init__(self, env: gym.Env, shape: tuple[int, ...]) -> None:
+        super().__init__(env)
+        self.shape, self.steps = shape, 0
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.steps += 1
+        if self.steps == 4:
+            return np.full(self.shape, 0.5, dtype=np.float32), reward, False, True, info
+        return obs, reward, terminated, truncated, info
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+@pytest.mark.parametrize("shape", [(1,), (), (6,)])
+def test_a_final_observation_of_another_shape_is_refused(model_class: type[BaseAlgorithm], shape: tuple[int, ...]) -> None:
+    # (1,) and () were broadcast into CartPole's (4,) and bootstrapped from ([x, x, x, x]); (6,) was NumPy's "could not
+    # broadcast input array" from the buffer; A2C refuses both in predict
+    env = DummyVecEnv([lambda: FinalObservationOfShape(gym.make("CartPole-v1"), shape)])
+    model = make_model(model_class, env, seed=0)
+    expected = rf"Env 0 returned a final observation .* of shape {re.escape(str(shape))} at step 4 .* has shape \(4,\)"
+    with pytest.raises(ValueError, match=expected):
+        model.learn(200)
+
+
+class IntegerDones(DummyVecEnv):
+    """A VecEnv of the user's that returns its dones as 0/1 integers (or floats)."""
+
+    dtype: type = np.int64
+
+    def step_wait(self) -> Any:
+        obs, rewards, dones, infos = super().step_wait()
+        return obs, rewards, dones.astype(self.dtype), infos
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+@pytest.mark.parametrize("dtype", [np.int64, np.float32])
+def test_dones_of_another_dtype_are_read_as_booleans(model_class: type[BaseAlgorithm], dtype: type) -> None:
+    # Integer dones indexed the envs ([1, 0] reset the episode lengths of envs 1 and 0): wrong γ^t and episode counts,
+    # and max_episode_length never cut; float ones crashed in NumPy. A2C and DQN train on them
+    def trained(vec_env: DummyVecEnv) -> Any:
+        return make_model(model_class, vec_env, seed=0).learn(400)
+
+    reference = trained(DummyVecEnv([lambda: Monitor(gym.make("CartPole-v1"))] * 2))
+    IntegerDones.dtype = dtype
+    other = trained(IntegerDones([lambda: Monitor(gym.make("CartPole-v1"))] * 2))
+    assert other._completed_episodes == reference._completed_episodes
+    assert parameters_equal(other.get_parameters(), reference.get_parameters())
+
+
+class NoFinalObservation(DummyVecEnv):
+    """A VecEnv of the user's that reports truncations without ``terminal_observation``."""
+
+    def step_wait(self) -> Any:
+        obs, rewards, dones, infos = super().step_wait()
+        for info in infos:
+            info.pop("terminal_observation", None)
+        return obs, rewards, dones, infos
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_a_truncation_without_its_final_observation_warns(model_class: type[BaseAlgorithm]) -> None:
+    env = NoFinalObservation([lambda: gym.wrappers.TimeLimit(gym.make("CartPole-v1").unwrapped, 5)])
+    model = make_model(model_class, env, seed=0)
+    with pytest.warns(UserWarning, match=r"truncation .* without its final observation .* trains it as a termination"):
+        model.learn(100)
 
 
 @pytest.mark.parametrize("model_class", MODEL_LIST)

@@ -445,20 +445,17 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         if self.handle_timeout_termination and dones.any():
             truncated = np.zeros_like(dones)
             for idx in np.flatnonzero(dones):
-                final_obs = infos[idx].get("terminal_observation")
-                if final_obs is not None and not all_finite(final_obs):
-                    batch = (
-                        {key: np.asarray(obs)[None] for key, obs in final_obs.items()}
-                        if isinstance(final_obs, dict)
-                        else np.asarray(final_obs)[None]
-                    )
-                    self._raise_non_finite(
-                        batch, "final observation (infos[i]['terminal_observation'])", env_indices=[int(idx)]
-                    )
                 # The VecEnv sets TimeLimit.truncated = truncated and not terminated
-                if infos[idx].get("TimeLimit.truncated", False) and infos[idx].get("terminal_observation") is not None:
-                    truncated[idx] = True
-                    final_observations[int(idx)] = infos[idx]["terminal_observation"]
+                if not infos[idx].get("TimeLimit.truncated", False):
+                    continue  # a termination: nothing is bootstrapped from its final observation
+                final_obs = infos[idx].get("terminal_observation")
+                if final_obs is None:
+                    self._warn_truncation_without_final_observation(int(idx))
+                    continue
+                # Bootstrapped from: checked as the observations are (A2C refuses a wrong shape in predict)
+                self._check_final_observation(final_obs, int(idx))
+                truncated[idx] = True
+                final_observations[int(idx)] = final_obs
         if self.max_episode_length is not None:
             overlong = ~dones & (self.rollout_buffer.episode_length + 1 >= self.max_episode_length)
             if overlong.any():
@@ -475,6 +472,49 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
                 if self.handle_timeout_termination:
                     final_observations.update({int(idx): select(new_obs, idx) for idx in np.flatnonzero(overlong)})
         return ends, truncated, final_observations
+
+    def _check_final_observation(self, final_obs: Any, env_idx: int) -> None:
+        """
+        :param final_obs: a truncated episode's final observation (``infos[i]['terminal_observation']``), which its
+            target bootstraps from
+        :param env_idx: its env
+        :raises ValueError: naming the env and the step, if it does not have the observation space's shape (it was
+            broadcast into the buffer: shape (1,) into (3,) became [x, x, x]) or holds NaN or ±inf
+        """
+        field = "final observation (infos[i]['terminal_observation'])"
+        observation_space = self.observation_space
+        space_of: dict[Any, spaces.Space] = (
+            {**observation_space.spaces} if isinstance(observation_space, spaces.Dict) else {None: observation_space}
+        )
+        values: dict[Any, Any] = final_obs if isinstance(final_obs, dict) else {None: final_obs}
+        for key, space in space_of.items():
+            shape = np.shape(values[key]) if key in values else None
+            if space.shape is not None and shape != space.shape:
+                name = field if key is None else f"{field}[{key!r}]"
+                step = int(self.rollout_buffer.episode_length[env_idx]) + 1
+                raise ValueError(
+                    f"Env {env_idx} returned a {name} of shape {shape} at step {step} of its episode, where "
+                    f"{type(self).__name__} bootstraps from it: the observation space {space} has shape {space.shape}. "
+                    "Make the env return final observations of the space's shape (a VecEnv of your own: the "
+                    "observation before its automatic reset)"
+                )
+        if not all_finite(final_obs):
+            batch = (
+                {key: np.asarray(obs)[None] for key, obs in final_obs.items()}
+                if isinstance(final_obs, dict)
+                else np.asarray(final_obs)[None]
+            )
+            self._raise_non_finite(batch, field, env_indices=[env_idx])
+
+    def _warn_truncation_without_final_observation(self, env_idx: int) -> None:
+        """A truncation without ``terminal_observation`` (a VecEnv of the user's) has nothing to bootstrap from."""
+        warnings.warn(
+            f"Env {env_idx} reported a time-limit truncation (infos[i]['TimeLimit.truncated']) without its final "
+            "observation (infos[i]['terminal_observation']): there is nothing to bootstrap from, so "
+            f"{type(self).__name__} trains it as a termination. SB3's VecEnvs put it there; a VecEnv of your own should "
+            "too (or pass handle_timeout_termination=False to treat every truncation as a termination)",
+            stacklevel=4,
+        )
 
     def _raise_non_finite(
         self,
@@ -507,11 +547,18 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
                 if after_reset is not None and after_reset[env_idx]
                 else f"step {step} of its episode"
             )
+        if "final observation" in field:
+            # VecCheckNan checks what step() returns, not the infos
+            find = "It is the observation the env returned at that step, before the VecEnv reset it: check the env there."
+        else:
+            find = (
+                "To find where the value comes from, wrap the env in "
+                "stable_baselines3.common.vec_env.VecCheckNan(env, raise_exception=True)."
+            )
         raise ValueError(
             f"Env {env_idx} returned a non-finite {field} ({value}) at {where}, {self.num_timesteps} env steps into "
             f"training (all envs together). {type(self).__name__} stopped before storing or training on it: the "
-            "model's parameters are those of its last update, and it can be saved. To find where the value comes "
-            "from, wrap the env in stable_baselines3.common.vec_env.VecCheckNan(env, raise_exception=True)."
+            f"model's parameters are those of its last update, and it can be saved. {find}"
         )
 
     def collect_rollouts(  # type: ignore[override]
@@ -554,6 +601,8 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
                 # The Gaussian is unbounded: clip what the env sees, store what was sampled
                 env_actions = np.clip(actions, self.action_space.low, self.action_space.high)
             new_obs, rewards, dones, infos = env.step(env_actions)
+            # A VecEnv of the user's may return 0/1 integers or floats: as an index, [1, 0] would select envs 1 and 0
+            dones = np.asarray(dones, dtype=bool)
             # Nothing is stored or trained on if a value is NaN or ±inf: the model stays as its last update left it.
             # Two np.isfinite calls, about 2 µs per step of all envs (~1% of the loop); final observations are
             # checked in _episode_ends
