@@ -43,6 +43,13 @@ def test_adam_is_fused_unless_the_user_chooses(model_class: type[Any]) -> None:
     for optimizer in optimizers(chosen):
         assert optimizer.defaults["foreach"] is True
         assert not optimizer.defaults["fused"]
+    # Choosing the implementation leaves Adam's eps alone (REINFORCE's was SB3's 1e-5 only without optimizer_kwargs)
+    default_eps = {optimizer.defaults["eps"] for optimizer in optimizers(model)}
+    assert {optimizer.defaults["eps"] for optimizer in optimizers(chosen)} == default_eps
+    own_eps = model_class(
+        "MlpPolicy", "CartPole-v1", device="cpu", policy_kwargs=dict(optimizer_kwargs=dict(fused=False, eps=1e-3))
+    )
+    assert {optimizer.defaults["eps"] for optimizer in optimizers(own_eps)} == {1e-3}
     sgd = model_class("MlpPolicy", "CartPole-v1", device="cpu", policy_kwargs=dict(optimizer_class=th.optim.SGD))
     for optimizer in optimizers(sgd):
         assert isinstance(optimizer, th.optim.SGD)

@@ -135,6 +135,10 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         policy_parameters = [param for param in self.parameters() if id(param) not in value_ids]
         value_lr_schedule = value_lr_schedule or lr_schedule
         optimizer_kwargs = optimizer_kwargs_with_defaults(self.optimizer_class, self.optimizer_kwargs)
+        if self.optimizer_class is th.optim.Adam:
+            # SB3's ActorCriticPolicy gives Adam eps=1e-5 (A2C's and PPO's) only where optimizer_kwargs is None: choosing
+            # the implementation (fused, foreach) would otherwise change the update too (eps=1e-8)
+            optimizer_kwargs.setdefault("eps", 1e-5)
         self.optimizer = self.optimizer_class(policy_parameters, lr=lr_schedule(1), **optimizer_kwargs)  # type: ignore[call-arg]
         self.value_optimizer: th.optim.Optimizer | None = None
         if use_baseline:
