@@ -11,10 +11,12 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.distributions import Distribution
 from stable_baselines3.common.envs import IdentityEnvBox, SimpleMultiObsEnv
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+from stable_baselines3.dqn.policies import QNetwork
 
 from sb3_classic import REINFORCE, NStepSARSA
 from sb3_classic.common.torch_layers import optimizer_kwargs_with_defaults
 from sb3_classic.reinforce.policies import REINFORCEPolicy
+from sb3_classic.sarsa.policies import SARSAPolicy
 
 MODEL_LIST = [REINFORCE, NStepSARSA]
 
@@ -179,3 +181,24 @@ def test_a_users_features_extractor_keeps_its_weights(model_class: type[Any], kw
         assert all(layer.bias is None for layer in others)
     if kwargs.get("weight_init") == 0.0:
         assert all(th.all(layer.weight == 0.0) for layer in others)
+
+
+class SmallTanhQ(SARSAPolicy):
+    """A Q-network of the user's through DQN's hook: 4-7-2 with Tanh."""
+
+    def make_q_net(self) -> QNetwork:
+        extractor = self.make_features_extractor()
+        return QNetwork(self.observation_space, self.action_space, extractor, extractor.features_dim, [7], th.nn.Tanh)
+
+
+def test_sarsa_builds_the_network_of_a_subclass_make_q_net() -> None:
+    # SARSA built its default 64-64 network whatever make_q_net returned (DQN builds the subclass's)
+    model = NStepSARSA(SmallTanhQ, "CartPole-v1", seed=0, device="cpu")
+    linears = [layer for layer in model.policy.q_net.modules() if isinstance(layer, th.nn.Linear)]
+    assert [layer.out_features for layer in linears] == [7, 2]
+    assert any(isinstance(layer, th.nn.Tanh) for layer in model.policy.q_net.modules())
+    before = [param.clone() for param in model.policy.q_net.parameters()]
+    model.learn(200)
+    trained = {id(param) for group in model.policy.optimizer.param_groups for param in group["params"]}
+    assert trained == {id(param) for param in model.policy.q_net.parameters()}
+    assert any(not th.equal(a, b) for a, b in zip(before, model.policy.q_net.parameters(), strict=True))

@@ -121,27 +121,8 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         self.target_network = target_network
         self.averaged_network = averaged_network
 
-        features_extractor = self.make_features_extractor()
-        self.q_net = QNetwork(
-            self.observation_space,
-            self.action_space,
-            features_extractor=features_extractor,
-            features_dim=features_extractor.features_dim,
-            net_arch=self.net_arch,
-            activation_fn=make_activation(activation_fn, activation_kwargs),
-            normalize_images=normalize_images,
-        )
-        if layer_norm or not with_bias:
-            # SB3's QNetwork has neither option: the same MLP from SB3's create_mlp, with them
-            mlp = create_mlp(
-                features_extractor.features_dim,
-                int(self.action_space.n),
-                self.net_arch,
-                make_activation(activation_fn, activation_kwargs),
-                with_bias=with_bias,
-                post_linear_modules=[nn.LayerNorm] if layer_norm else None,
-            )
-            self.q_net.q_net = nn.Sequential(*mlp)
+        self.q_net = self.make_q_net()
+        features_extractor = self.q_net.features_extractor
         layers = list(self.q_net.q_net)
         # (a features extractor of the user's keeps the initialisation it was built with)
         own = [features_extractor] if is_library_extractor(features_extractor) else []
@@ -194,6 +175,37 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
     def forward(self, obs: PyTorchObs, deterministic: bool = True) -> th.Tensor:
         """:return: the greedy actions argmax_a q̂(obs, a)"""
         return self._predict(obs, deterministic=deterministic)
+
+    def make_q_net(self) -> QNetwork:
+        """
+        Build q̂ (SB3 DQN's hook of the same name: a subclass may override it to build another network; the
+        initialisation, the optimizer and the bootstrap copy and the average are made from what it returns).
+
+        :return: the Q-network: a features extractor, then ``net_arch`` hidden layers and one output per action
+        """
+        features_extractor = self.make_features_extractor()
+        activation = make_activation(self.activation_fn, self.activation_kwargs)
+        q_net = QNetwork(
+            self.observation_space,
+            self.action_space,
+            features_extractor=features_extractor,
+            features_dim=features_extractor.features_dim,
+            net_arch=self.net_arch,
+            activation_fn=activation,
+            normalize_images=self.normalize_images,
+        )
+        if self.layer_norm or not self.with_bias:
+            # SB3's QNetwork has neither option: the same MLP from SB3's create_mlp, with them
+            mlp = create_mlp(
+                features_extractor.features_dim,
+                int(self.action_space.n),
+                self.net_arch,
+                activation,
+                with_bias=self.with_bias,
+                post_linear_modules=[nn.LayerNorm] if self.layer_norm else None,
+            )
+            q_net.q_net = nn.Sequential(*mlp)
+        return q_net
 
     @property
     def greedy_net(self) -> QNetwork:
