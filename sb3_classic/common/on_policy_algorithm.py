@@ -438,7 +438,8 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         """
         :return: which episodes ended with this step, which of those to bootstrap from (time-limit truncations,
             and episodes cut at ``max_episode_length``), and the final observations to bootstrap from, by env
-        :raises ValueError: if a final observation (bootstrapped from) holds NaN or ±inf
+        :raises ValueError: if a final observation bootstrapped from (a truncation's) holds NaN or ±inf, or has another
+            shape than the observation space's
         """
         ends, truncated = dones, self._no_truncation
         final_observations: dict[int, Any] = {}
