@@ -5,6 +5,7 @@ infinity from an env; and values a YAML or another library's habit gives that wo
 """
 
 import copy
+import functools
 import glob
 import math
 import re
@@ -788,6 +789,21 @@ REFUSED_INPUTS = [
         TypeError,
         "activation_kwargs go to activation_fn=LeakyReLU",
     ),
+    # ... and without activation_fn, to the default one (the hint listed the policy's arguments, activation_kwargs among
+    # them); a partial instead names activation_kwargs
+    (
+        NStepSARSA,
+        dict(policy_kwargs=dict(activation_kwargs=dict(negative_slope=0.1))),
+        TypeError,
+        "activation_kwargs go to activation_fn, here the default ReLU: pass the activation they belong to",
+    ),
+    (
+        REINFORCE,
+        dict(policy_kwargs=dict(activation_fn=functools.partial(th.nn.LeakyReLU, negative_slope=0.2))),
+        TypeError,
+        "(for its arguments: activation_fn=LeakyReLU, activation_kwargs={'negative_slope': 0.2})",
+    ),
+    (NStepSARSA, dict(policy_kwargs=dict(net_arch=np.array([16, 8]))), ValueError, "write it as a list, net_arch=[16, 8]"),
 ]
 
 

@@ -346,6 +346,11 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
                 return f"features_extractor_kwargs go to features_extractor_class={name}: give that class's own arguments"
             if "activation_kwargs" in self.policy_kwargs and activation is not None and activation.__name__ == name:
                 return f"activation_kwargs go to activation_fn={name}: give that class's own arguments"
+            if "activation_kwargs" in self.policy_kwargs and activation is None:
+                return (
+                    f"activation_kwargs go to activation_fn, here the default {name}: pass the activation they belong "
+                    "to (e.g. activation_fn=nn.LeakyReLU for negative_slope), or drop them"
+                )
         parameters = [name for name in inspect.signature(self.policy_class).parameters if name not in _POLICY_ARGUMENTS]
         return (
             f"{type(self).__name__}'s policy takes {', '.join(parameters)} "

@@ -9,6 +9,7 @@ from collections.abc import Iterable, Sequence
 from functools import partial
 from typing import Any, Literal
 
+import numpy as np
 import torch as th
 from torch import nn
 
@@ -57,6 +58,8 @@ def check_net_arch(net_arch: Any, keys: Sequence[str] = ()) -> None:
 
 
 def _check_layer_sizes(name: str, sizes: Any, example: str) -> None:
+    if isinstance(sizes, np.ndarray) and sizes.ndim == 1:
+        raise ValueError(f"{name}={sizes!r}: write it as a list, net_arch={sizes.tolist()!r}")
     if isinstance(sizes, (str, bytes, dict)) or not isinstance(sizes, Sequence):
         raise ValueError(f"{name}={sizes!r} must be a list of hidden layer sizes, {example}")
     for size in sizes:
@@ -76,9 +79,14 @@ def make_activation(activation_fn: type[nn.Module], activation_kwargs: dict[str,
     :raises TypeError: if ``activation_fn`` is not an ``nn.Module`` class (a string, or an instance such as ``nn.ReLU()``)
     """
     if not (isinstance(activation_fn, type) and issubclass(activation_fn, nn.Module)):
+        arguments = (
+            f" (for its arguments: activation_fn={activation_fn.func.__name__}, activation_kwargs={activation_fn.keywords!r})"
+            if isinstance(activation_fn, partial) and isinstance(activation_fn.func, type)
+            else ""
+        )
         raise TypeError(
-            f"activation_fn={activation_fn!r} must be an activation class such as nn.ReLU (the class, not a string or "
-            'an instance nn.ReLU()); in a zoo YAML: policy_kwargs: "dict(activation_fn=nn.ReLU)"'
+            f"activation_fn={activation_fn!r} must be an activation class such as nn.ReLU (the class, not a string, a "
+            f'partial or an instance nn.ReLU()){arguments}; in a zoo YAML: policy_kwargs: "dict(activation_fn=nn.ReLU)"'
         )
     if not activation_kwargs:
         return activation_fn
