@@ -202,3 +202,32 @@ def test_sarsa_builds_the_network_of_a_subclass_make_q_net() -> None:
     trained = {id(param) for group in model.policy.optimizer.param_groups for param in group["params"]}
     assert trained == {id(param) for param in model.policy.q_net.parameters()}
     assert any(not th.equal(a, b) for a, b in zip(before, model.policy.q_net.parameters(), strict=True))
+
+
+class TrunkAndHeads(th.nn.Module):
+    """An mlp_extractor of SB3's custom-policy shape, with its parts named otherwise (actor, critic)."""
+
+    def __init__(self, features_dim: int) -> None:
+        super().__init__()
+        self.latent_dim_pi = self.latent_dim_vf = 8
+        self.actor, self.critic = th.nn.Linear(features_dim, 8), th.nn.Linear(features_dim, 8)
+
+    def forward(self, features: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
+        return self.forward_actor(features), self.forward_critic(features)
+
+    def forward_actor(self, features: th.Tensor) -> th.Tensor:
+        return self.actor(features)
+
+    def forward_critic(self, features: th.Tensor) -> th.Tensor:
+        return self.critic(features)
+
+
+class OtherNames(REINFORCEPolicy):
+    def _build_mlp_extractor(self) -> None:
+        self.mlp_extractor = TrunkAndHeads(self.features_dim)  # type: ignore[assignment]
+
+
+def test_an_mlp_extractor_without_sb3s_names_is_named() -> None:
+    # AttributeError: 'TrunkAndHeads' object has no attribute 'value_net', from deep in the policy's constructor
+    with pytest.raises(TypeError, match=r"mlp_extractor=TrunkAndHeads .* has no policy_net: .* name its two parts so"):
+        REINFORCE(OtherNames, "CartPole-v1", device="cpu")

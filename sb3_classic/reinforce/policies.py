@@ -101,6 +101,14 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
             optimizer_class=optimizer_class,
             optimizer_kwargs=optimizer_kwargs,
         )
+        for part in ("policy_net", "value_net"):
+            if not isinstance(getattr(self.mlp_extractor, part, None), nn.Module):
+                raise TypeError(
+                    f"mlp_extractor={type(self.mlp_extractor).__name__} (from _build_mlp_extractor) has no {part}: "
+                    "REINFORCE gives the policy and the value network their own optimizers by mlp_extractor.policy_net "
+                    "and mlp_extractor.value_net, SB3's MlpExtractor's names (those of SB3's custom-policy example); "
+                    "name its two parts so"
+                )
         self.activation_fn = activation_fn
         self.activation_kwargs = activation_kwargs
         self.weight_init = weight_init
