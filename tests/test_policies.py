@@ -231,3 +231,27 @@ def test_an_mlp_extractor_without_sb3s_names_is_named() -> None:
     # AttributeError: 'TrunkAndHeads' object has no attribute 'value_net', from deep in the policy's constructor
     with pytest.raises(TypeError, match=r"mlp_extractor=TrunkAndHeads .* has no policy_net: .* name its two parts so"):
         REINFORCE(OtherNames, "CartPole-v1", device="cpu")
+
+
+class AlwaysAction1(SARSAPolicy):
+    """A greedy policy of the user's: action 1 whatever q̂ says (as action masking overrides _predict in DQN)."""
+
+    def _predict(self, observation: Any, deterministic: bool = True) -> th.Tensor:
+        return th.ones(len(observation), dtype=th.int64)
+
+
+def test_sarsa_behaviour_policy_is_greedy_in_a_subclass_predict() -> None:
+    # The rollout took q̂'s argmax whatever the subclass said (with ε = 0); DQN's ε-greedy takes the policy's _predict
+    taken: list[int] = []
+
+    class Actions(BaseCallback):
+        def _on_step(self) -> bool:
+            taken.extend(np.asarray(self.locals["actions"]).ravel().tolist())
+            return True
+
+    model = NStepSARSA(
+        AlwaysAction1, "CartPole-v1", exploration_initial_eps=0.0, exploration_final_eps=0.0, seed=0, device="cpu"
+    )
+    model.learn(300, callback=Actions())
+    assert len(taken) >= 300
+    assert set(taken) == {1}

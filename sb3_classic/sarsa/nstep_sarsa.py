@@ -377,6 +377,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         return np.where(explore, uniform, greedy_actions)
 
     def _sample_actions(self, obs: th.Tensor | dict[str, th.Tensor]) -> np.ndarray:
+        if type(self.policy)._predict is not SARSAPolicy._predict:
+            # A subclass's greedy policy (action masking, say), as SB3's DQN's ε-greedy takes its policy's predict
+            return self._epsilon_greedy(self.policy._predict(obs, deterministic=False).cpu().numpy().reshape(-1))
         q_values = self.policy.q_net(obs).cpu().numpy()
         if self.update_mode == "per_step":
             # Kept for the bootstrap of the next update, if no update comes in between (see _next_state_values)
