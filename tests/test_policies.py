@@ -109,6 +109,19 @@ def test_reinforce_samples_as_sb3_distributions_do(env: Any, policy: str, policy
     assert len(draws) > 1  # random, not the greedy action
 
 
+def actions_taken(model: REINFORCE | NStepSARSA, total_timesteps: int) -> list[int]:
+    """:return: the actions of the rollout loop (``locals["actions"]``) of ``model.learn(total_timesteps)``"""
+    taken: list[int] = []
+
+    class Actions(BaseCallback):
+        def _on_step(self) -> bool:
+            taken.extend(np.asarray(self.locals["actions"]).ravel().tolist())
+            return True
+
+    model.learn(total_timesteps, callback=Actions())
+    return taken
+
+
 class NeverAction1(REINFORCEPolicy):
     """A policy that masks action 1 through SB3's hook of the action distribution (as action masking does)."""
 
@@ -122,15 +135,8 @@ class NeverAction1(REINFORCEPolicy):
 def test_reinforce_rollouts_draw_from_a_subclass_distribution() -> None:
     # The rollout's fast draw rebuilt the logits itself: it took action 1 about half the time, which the policy gives
     # probability e^-1e9 (A2C's rollouts honour the hook)
-    taken: list[int] = []
-
-    class Actions(BaseCallback):
-        def _on_step(self) -> bool:
-            taken.extend(np.asarray(self.locals["actions"]).ravel().tolist())
-            return True
-
     model = REINFORCE(NeverAction1, "CartPole-v1", seed=0, device="cpu")
-    model.learn(300, callback=Actions())
+    taken = actions_taken(model, 300)
     assert len(taken) >= 300
     assert set(taken) == {0}
     assert not model.policy._sb3_distribution
@@ -242,16 +248,9 @@ class AlwaysAction1(SARSAPolicy):
 
 def test_sarsa_behaviour_policy_is_greedy_in_a_subclass_predict() -> None:
     # The rollout took q̂'s argmax whatever the subclass said (with ε = 0); DQN's ε-greedy takes the policy's _predict
-    taken: list[int] = []
-
-    class Actions(BaseCallback):
-        def _on_step(self) -> bool:
-            taken.extend(np.asarray(self.locals["actions"]).ravel().tolist())
-            return True
-
     model = NStepSARSA(
         AlwaysAction1, "CartPole-v1", exploration_initial_eps=0.0, exploration_final_eps=0.0, seed=0, device="cpu"
     )
-    model.learn(300, callback=Actions())
+    taken = actions_taken(model, 300)
     assert len(taken) >= 300
     assert set(taken) == {1}
