@@ -30,6 +30,11 @@ from sb3_classic.common.utils import check_bool, check_choice, check_learning_ra
 
 SelfClassicOnPolicyAlgorithm = TypeVar("SelfClassicOnPolicyAlgorithm", bound="ClassicOnPolicyAlgorithm")
 
+#: The advice of a non-finite value's error, for the values ``step()`` returns
+FIND_NON_FINITE = (
+    "To find where the value comes from, wrap the env in stable_baselines3.common.vec_env.VecCheckNan(env, "
+    "raise_exception=True)."
+)
 #: True while ``load()`` builds a model (its checks then accept a learning rate of 0)
 LOADING: contextvars.ContextVar[bool] = contextvars.ContextVar("sb3_classic_loading", default=False)
 #: The policy's arguments the algorithm passes itself (not ``policy_kwargs``)
@@ -510,7 +515,9 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
                 if isinstance(final_obs, dict)
                 else np.asarray(final_obs)[None]
             )
-            self._raise_non_finite(batch, field, env_indices=[env_idx])
+            # (VecCheckNan checks what step() returns, not the infos)
+            find = "It is the observation the env returned at that step, before the VecEnv reset it: check the env there."
+            self._raise_non_finite(batch, field, env_indices=[env_idx], find=find)
 
     def _warn_truncation_without_final_observation(self, env_idx: int) -> None:
         """A truncation without ``terminal_observation`` (a VecEnv of the user's) has nothing to bootstrap from."""
@@ -529,6 +536,7 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         where: str = "",
         after_reset: np.ndarray | None = None,
         env_indices: Sequence[int] | None = None,
+        find: str = FIND_NON_FINITE,
     ) -> None:
         """
         Raise a ValueError naming the env, the step and the field of a NaN or ±inf an env returned (an observation, a
@@ -540,6 +548,7 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         :param where: when it was returned, if not at the current step of the env's episode
         :param after_reset: envs whose episode ended at this step (their observation is a new episode's first)
         :param env_indices: the env index of each row of ``values`` (default: row i is env i)
+        :param find: how to find where the value comes from
         :raises ValueError: always
         """
         row, key, value = non_finite_entries(values)
@@ -552,14 +561,6 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
                 f"the first observation of a new episode (after the reset that ended step {step} of the previous one)"
                 if after_reset is not None and after_reset[env_idx]
                 else f"step {step} of its episode"
-            )
-        if "final observation" in field:
-            # VecCheckNan checks what step() returns, not the infos
-            find = "It is the observation the env returned at that step, before the VecEnv reset it: check the env there."
-        else:
-            find = (
-                "To find where the value comes from, wrap the env in "
-                "stable_baselines3.common.vec_env.VecCheckNan(env, raise_exception=True)."
             )
         raise ValueError(
             f"Env {env_idx} returned a non-finite {field} ({value}) at {where}, {self.num_timesteps} env steps into "

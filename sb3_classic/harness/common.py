@@ -56,6 +56,13 @@ def algorithm_arguments(algo: str) -> set[str]:
     return set(inspect.signature(rl_zoo3.ALGOS[algo].__init__).parameters) - {"self", "env", "_init_setup_model"}
 
 
+def algorithm_defaults(algo: str) -> dict[str, Any]:
+    """:return: the constructor arguments of ``rl_zoo3.ALGOS[algo]`` that have a default, with it"""
+    register_algorithms()
+    parameters = inspect.signature(rl_zoo3.ALGOS[algo].__init__).parameters.items()
+    return {name: parameter.default for name, parameter in parameters if parameter.default is not inspect.Parameter.empty}
+
+
 def unknown_setting(algo: str, key: str) -> str | None:
     """
     :param algo: a key of ``rl_zoo3.ALGOS``

@@ -109,6 +109,10 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
                     "and mlp_extractor.value_net, SB3's MlpExtractor's names (those of SB3's custom-policy example); "
                     "name its two parts so"
                 )
+        #: Whether the action distribution is SB3's own (no subclass overrides a hook ``get_distribution`` calls), which
+        #: ``sample_actions`` may then draw from without building it
+        hooks = ("get_distribution", "_get_action_dist_from_latent", "extract_features")
+        self._sb3_distribution = all(getattr(type(self), hook) is getattr(REINFORCEPolicy, hook) for hook in hooks)
         self.activation_fn = activation_fn
         self.activation_kwargs = activation_kwargs
         self.weight_init = weight_init
@@ -219,12 +223,6 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         """
         if self.training != mode:
             super().set_training_mode(mode)
-
-    @property
-    def _sb3_distribution(self) -> bool:
-        """Whether the action distribution is SB3's own: no subclass overrides a hook ``get_distribution`` calls."""
-        hooks = ("get_distribution", "_get_action_dist_from_latent", "extract_features")
-        return all(getattr(type(self), hook) is getattr(REINFORCEPolicy, hook) for hook in hooks)
 
     @property
     def value_parameters(self) -> list[nn.Parameter]:

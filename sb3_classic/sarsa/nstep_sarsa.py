@@ -1,5 +1,4 @@
 import math
-import weakref
 from collections.abc import Callable, Sequence
 from typing import Any, ClassVar, Literal, TypeVar
 
@@ -28,7 +27,7 @@ from sb3_classic.sarsa.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, S
 SelfNStepSARSA = TypeVar("SelfNStepSARSA", bound="NStepSARSA")
 
 
-def _polyak_update(source: th.nn.Module, copy: th.nn.Module, tau: float) -> None:
+def _polyak_update(source: th.nn.Module, copy: th.nn.Module, tau: float, statistics: bool) -> None:
     """
     w' ← τ w + (1 − τ) w' of the parameters (SB3's ``polyak_update``), and the running statistics of normalisation
     layers (BatchNorm's ``running_mean``, ``running_var``) copied, as SB3's DQN copies them to its target network:
@@ -37,18 +36,12 @@ def _polyak_update(source: th.nn.Module, copy: th.nn.Module, tau: float) -> None
     :param source: q̂'s network
     :param copy: the bootstrap copy or the weight average
     :param tau: the coefficient τ
+    :param statistics: whether the networks may hold such statistics (``SARSAPolicy.mode_dependent``): the state_dict
+        walk that finds them costs more than the update of a small q̂
     """
     polyak_update(source.parameters(), copy.parameters(), tau)
-    if copy not in _HAS_STATISTICS:
-        # Asked once per copy: a state_dict walk at every update costs more than the update of a small q̂
-        _HAS_STATISTICS[copy] = bool(get_parameters_by_name(copy, ["running_"]))
-    if _HAS_STATISTICS[copy]:
-        # (Looked up each time: module.to() replaces buffers by new tensors)
+    if statistics:
         polyak_update(get_parameters_by_name(source, ["running_"]), get_parameters_by_name(copy, ["running_"]), 1.0)
-
-
-#: Per bootstrap copy or weight average: whether it has running statistics (its structure does not change)
-_HAS_STATISTICS: "weakref.WeakKeyDictionary[th.nn.Module, bool]" = weakref.WeakKeyDictionary()
 
 
 # The linear ε schedule's, when exploration_fraction is None (SB3's DQN's default)
@@ -377,7 +370,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         return np.where(explore, uniform, greedy_actions)
 
     def _sample_actions(self, obs: th.Tensor | dict[str, th.Tensor]) -> np.ndarray:
-        if type(self.policy)._predict is not SARSAPolicy._predict:
+        if self.policy.own_predict:
             # A subclass's greedy policy (action masking, say), as SB3's DQN's ε-greedy takes its policy's predict
             return self._epsilon_greedy(self.policy._predict(obs, deterministic=False).cpu().numpy().reshape(-1))
         q_values = self.policy.q_net(obs).cpu().numpy()
@@ -692,7 +685,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         target = self.policy.q_net_target
         if target is not None and self.num_timesteps - self._target_updated_at >= (self.target_update_interval or 0):
             # w⁻ ← τ w + (1 − τ) w⁻ (SB3's DQN; not in the book)
-            _polyak_update(self.policy.q_net, target, self.tau)
+            _polyak_update(self.policy.q_net, target, self.tau, self.policy.mode_dependent)
             self._target_updated_at = self.num_timesteps
         self._update_average()
         self._n_updates += self.gradient_steps * len(chunks)
@@ -704,7 +697,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         average = self.policy.q_net_average
         if average is not None and self.averaging_tau is not None:
             # w̄ ← τ w + (1 − τ) w̄ (SB3's polyak_update; not in the book)
-            _polyak_update(self.policy.q_net, average, self.averaging_tau)
+            _polyak_update(self.policy.q_net, average, self.averaging_tau, self.policy.mode_dependent)
 
     def _record_update(self, loss: th.Tensor, q_predicted: th.Tensor, targets: th.Tensor) -> None:
         """

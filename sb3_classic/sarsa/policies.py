@@ -136,8 +136,12 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             for module in hidden:
                 module.apply(lambda layer: self.init_weights(layer, gain=np.sqrt(2)))
             output.apply(lambda layer: self.init_weights(layer, gain=1.0))
-        # Whether any module's forward depends on train/eval mode (see set_training_mode)
-        self._mode_dependent = any(isinstance(module, MODE_DEPENDENT_MODULES) for module in self.q_net.modules())
+        #: Whether any module's forward depends on train/eval mode (see set_training_mode): BatchNorm's running
+        #: statistics among them
+        self.mode_dependent = any(isinstance(module, MODE_DEPENDENT_MODULES) for module in self.q_net.modules())
+        #: Whether a subclass overrides ``_predict`` (its greedy policy, e.g. action masking): the ε-greedy behaviour
+        #: policy is then ε-greedy in it, as SB3's DQN's is
+        self.own_predict = type(self)._predict is not SARSAPolicy._predict
         # q̂'s one layer if q̂ is linear in features without parameters (see linear_layer); in __dict__, not registered
         # as a submodule again (the state dict keeps its keys)
         linear = len(layers) == 1 and isinstance(output, nn.Linear) and next(features_extractor.parameters(), None) is None
@@ -251,7 +255,7 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         """
         if self.training == mode and self.q_net.training == mode:
             return
-        if not self._mode_dependent:
+        if not self.mode_dependent:
             # No module behaves differently in the two modes (no dropout, no batch norm): only the flags change, which
             # saves the per-step loop a walk over every submodule twice per env step. They are plain attributes, set
             # past nn.Module.__setattr__ (its checks for parameters and submodules cost more than the assignment)

@@ -249,8 +249,3 @@ def check_settings(studies: Sequence[StudySpec], pending: set[str], console: Con
                 where = f"variant {run.variant!r}" + ("" if run.reading == STATED else f" under reading {run.reading!r}")
                 problems.append(f"{study.path}: {where}: {error}")
     return problems
-
-
-def studies_of(paths: Sequence[Path]) -> list[StudySpec]:
-    """:return: the studies of the files and folders named, loaded and checked"""
-    return [load_study(path) for path in study_files(paths)]

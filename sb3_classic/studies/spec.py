@@ -31,7 +31,6 @@ The format (the README of the repository's ``benchmarks/studies/`` has the long 
 
 import dataclasses
 import difflib
-import inspect
 import math
 from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -42,8 +41,7 @@ import gymnasium
 import rl_zoo3
 import yaml
 
-from sb3_classic.harness.common import THRESHOLDS, RunSpec, register_algorithms, unknown_setting
-from sb3_classic.zoo import ALGORITHMS
+from sb3_classic.harness.common import THRESHOLDS, RunSpec, algorithm_defaults, register_algorithms, unknown_setting
 
 METRICS = ("mean_return", "last_100_return", "episodes_to_threshold")
 CLAIM_KINDS = ("better", "similar", "reaches", "below")
@@ -470,11 +468,7 @@ def _check_distinct_variants(check: _Checker, study: StudySpec) -> None:
     base without it): each would be compared with the other as if they differed, and a claim between them decided on
     two copies of one run. (Defaults inside ``policy_kwargs`` are not filled in.)
     """
-    defaults = {
-        name: parameter.default
-        for name, parameter in inspect.signature(ALGORITHMS[study.algo].__init__).parameters.items()
-        if parameter.default is not inspect.Parameter.empty
-    } | {"n_envs": 1}  # (rl-zoo3's default)
+    defaults = algorithm_defaults(study.algo) | {"n_envs": 1}  # (rl-zoo3's default)
     seen: dict[str, str] = {}
     for name in study.variants:
         stated = study.zoo_entry(name)
