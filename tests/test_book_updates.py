@@ -176,64 +176,127 @@ def test_the_book_loops_update_is_train_to_the_last_bit(kwargs: dict[str, Any], 
     assert fast_log == general_log
 
 
-def _linear_sarsa_runs(make: Any, steps: int, monkeypatch: pytest.MonkeyPatch) -> tuple[int, list[tuple[Any, ...]]]:
+MOUNTAIN_CAR_TILES = dict(n_tilings=8, tiles_per_dim=8, low=(-1.2, -0.07), high=(0.5, 0.07))
+
+
+def tile_coded_sarsa(with_bias: bool = False, hash_size: int | None = None, **kwargs: Any) -> NStepSARSA:
+    """:return: per-step linear SARSA with plain SGD over tile coding on Mountain Car (the book's Figs 10.1–10.4)"""
+    tiles = MOUNTAIN_CAR_TILES | dict(hash_size=hash_size)
+    return NStepSARSA(
+        "MlpPolicy", "MountainCar-v0", learning_rate=0.3 / 8, gradient_steps=1, update_mode="per_step", gamma=1.0,
+        exploration_initial_eps=0.1, exploration_final_eps=0.1,
+        policy_kwargs=linear_sgd(
+            with_bias=with_bias, weight_init=0.0, features_extractor_class=TileCoding, features_extractor_kwargs=tiles
+        ),
+        seed=3, device="cpu", **(dict(train_freq=1) | kwargs),
+    )  # fmt: skip
+
+
+def _linear_sarsa_runs(
+    make: Any, steps: int, direct: str, switched_off: tuple[str, ...], monkeypatch: pytest.MonkeyPatch
+) -> tuple[int, list[tuple[Any, ...]]]:
     """
-    Train ``make()`` for ``steps`` env steps twice: with the linear SGD update applied directly (``_linear_sgd_step``)
-    and through autograd and ``torch.optim.SGD`` (the direct update switched off).
+    Train ``make()`` for ``steps`` env steps twice: as it comes, counting the calls of the update ``direct``, then
+    with the methods ``switched_off`` returning None (the linear update through autograd and ``torch.optim.SGD``).
 
     :return: the direct updates made in the first run, and each run's parameters and last log
     """
     calls = [0]
-    direct = NStepSARSA._linear_sgd_step
+    update = getattr(NStepSARSA, direct)
 
     def counted(self: NStepSARSA, *args: Any) -> Any:
         calls[0] += 1
-        return direct(self, *args)
+        return update(self, *args)
 
     runs = []
-    for switched_off in (False, True):
-        if switched_off:
-            monkeypatch.setattr(NStepSARSA, "_plain_sgd_linear_layer", lambda self: None)
+    for off in (False, True):
+        if off:
+            monkeypatch.setattr(NStepSARSA, direct, update)
+            for name in switched_off:
+                monkeypatch.setattr(NStepSARSA, name, lambda self: None)
         else:
-            monkeypatch.setattr(NStepSARSA, "_linear_sgd_step", counted)
+            monkeypatch.setattr(NStepSARSA, direct, counted)
         model = make()
         model.learn(steps)
         runs.append(([p.detach().clone() for p in model.policy.parameters()], dict(model.logger.name_to_value)))
     return calls[0], runs
 
 
-@pytest.mark.parametrize(
-    "kwargs",
-    [dict(n_steps=4), dict(n_steps=1, expected_sarsa=True, with_bias=True), dict(n_steps=3, train_freq=4)],
-    ids=["n=4", "n=1 expected, bias", "n=3 train_freq=4"],
-)
+LINEAR_SETTINGS = [dict(n_steps=4), dict(n_steps=1, expected_sarsa=True, with_bias=True), dict(n_steps=3, train_freq=4)]
+LINEAR_IDS = ["n=4", "n=1 expected, bias", "n=3 train_freq=4"]
+
+
+@pytest.mark.parametrize("kwargs", LINEAR_SETTINGS, ids=LINEAR_IDS)
 def test_direct_linear_sgd_update_is_autograds_to_the_last_bit(
     kwargs: dict[str, Any], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """
-    The per-step mode's update of a linear q̂ with plain SGD, applied to W_a without autograd (issue 12's speed), gives
-    the parameters and the log of autograd and ``torch.optim.SGD`` bit for bit: over tile coding on Mountain Car (the
-    book's Figs 10.1–10.4), with a bias, Expected SARSA and updates of several transitions at once.
+    The per-step mode's update of a linear q̂ with plain SGD on dense features, applied to W_a without autograd
+    (issue 12's speed), gives the parameters and the log of autograd and ``torch.optim.SGD`` bit for bit: over tile
+    coding's dense features on Mountain Car (its sparse path switched off), with a bias, Expected SARSA and updates of
+    several transitions at once.
     """
-    settings = dict(train_freq=1) | kwargs
-    with_bias = settings.pop("with_bias", False)
-    tiles = dict(n_tilings=8, tiles_per_dim=8, low=(-1.2, -0.07), high=(0.5, 0.07))
-
-    def make() -> NStepSARSA:
-        return NStepSARSA(
-            "MlpPolicy", "MountainCar-v0", learning_rate=0.3 / 8, gradient_steps=1, update_mode="per_step", gamma=1.0,
-            exploration_initial_eps=0.1, exploration_final_eps=0.1,
-            policy_kwargs=linear_sgd(
-                with_bias=with_bias, weight_init=0.0, features_extractor_class=TileCoding, features_extractor_kwargs=tiles
-            ),
-            seed=3, device="cpu", **settings,
-        )  # fmt: skip
-
-    direct_updates, (fast, general) = _linear_sarsa_runs(make, 1200, monkeypatch)
+    monkeypatch.setattr(NStepSARSA, "_tile_coded_q", lambda self: None)
+    direct_updates, (fast, general) = _linear_sarsa_runs(
+        lambda: tile_coded_sarsa(**kwargs), 1200, "_linear_sgd_step", ("_plain_sgd_linear_layer",), monkeypatch
+    )
     assert direct_updates > 1000
     assert all(th.equal(a, b) for a, b in zip(fast[0], general[0], strict=True))
     assert fast[1] == general[1]
     assert fast[0][0].abs().max() > 0.1, "the weights should have moved"
+
+
+@pytest.mark.parametrize(
+    "kwargs", [*LINEAR_SETTINGS, dict(n_steps=4, hash_size=64)], ids=[*LINEAR_IDS, "n=4 hashed, collisions"]
+)
+def test_tile_coded_sgd_update_is_autograds_to_float32_rounding(
+    kwargs: dict[str, Any], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """
+    Over tile coding, the rollout's q̂ and the per-step update go over the active tiles, as the book's code does:
+    q̂ = Σ_t W[a, i_t(s)], and α[G − q̂] added to each active tile's weight (``_tile_q_values``, ``_tile_sgd_step``).
+    The same learning as the dense features through autograd and ``torch.optim.SGD``, to float32 rounding (the sum's
+    order differs), over 1,200 steps of Mountain Car: with a bias, Expected SARSA, several transitions at once, and
+    hashed tiles that collide (a tile met by two tilings gets the step twice, as its feature is 2).
+    """
+    direct_updates, (fast, general) = _linear_sarsa_runs(
+        lambda: tile_coded_sarsa(**kwargs), 1200, "_tile_sgd_step", ("_tile_coded_q", "_plain_sgd_linear_layer"), monkeypatch
+    )
+    assert direct_updates > 300 if kwargs.get("train_freq") else direct_updates > 1000
+    for a, b in zip(fast[0], general[0], strict=True):
+        np.testing.assert_allclose(a.numpy(), b.numpy(), rtol=1e-5, atol=1e-5)
+    assert fast[0][0].abs().max() > 0.1, "the weights should have moved"
+    assert fast[1].keys() == general[1].keys()
+    for key, value in fast[1].items():
+        assert value == pytest.approx(general[1][key], rel=1e-5, abs=1e-5), key
+    if kwargs.get("hash_size"):
+        model = tile_coded_sarsa(**kwargs)
+        extractor = model.policy.q_net.features_extractor
+        assert isinstance(extractor, TileCoding)
+        tiles = extractor.active_tiles_numpy(np.random.default_rng(0).uniform(-1, 0.5, (500, 2)) * [1, 0.07])
+        assert any(len(set(row)) < len(row) for row in tiles.tolist()), "the hash should collide within an observation"
+
+
+def test_tile_q_values_are_the_dense_forward_pass() -> None:
+    """The rollout's q̂ over the active tiles equals the policy's dense forward pass, with and without bias and hashing."""
+    rng = np.random.default_rng(1)
+    obs = (rng.uniform(-1.3, 0.6, (200, 2)) * [1, 0.07 / 0.6]).astype(np.float32)
+    for with_bias, hash_size in ((False, None), (True, None), (True, 64)):
+        model = tile_coded_sarsa(with_bias=with_bias, hash_size=hash_size)
+        assert model._tile_coded is not None
+        assert model._tile_sgd is not None
+        with th.no_grad():
+            for parameter in model.policy.q_net.parameters():
+                parameter.normal_()
+            dense = model.policy.q_net(th.as_tensor(obs)).numpy()
+        np.testing.assert_allclose(model._tile_q_values(*model._tile_coded, obs), dense, rtol=1e-5, atol=1e-5)
+    # Not over features with parameters, Adam (the rollout's q̂ only), or other features
+    hidden = NStepSARSA("MlpPolicy", "MountainCar-v0", policy_kwargs=dict(net_arch=[8], features_extractor_class=TileCoding))
+    assert hidden._tile_coded is None
+    adam = NStepSARSA("MlpPolicy", "MountainCar-v0", policy_kwargs=dict(net_arch=[], features_extractor_class=TileCoding))
+    assert adam._tile_coded is not None
+    assert adam._tile_sgd is None
+    assert NStepSARSA("MlpPolicy", "MountainCar-v0", policy_kwargs=linear_sgd())._tile_coded is None
 
 
 @pytest.mark.parametrize(
@@ -284,7 +347,7 @@ def test_random_tie_breaking_in_the_behaviour_policy_and_stochastic_predict() ->
     )  # fmt: skip
     obs = th.as_tensor(np.stack([env.features[0][0]] * 300))
     with th.no_grad():  # as in the rollout loop
-        sampled = model._sample_actions(obs)
+        sampled = model._sample_actions(obs.numpy())
     assert set(sampled.tolist()) == set(range(N_ACTIONS))
     assert np.bincount(sampled, minlength=N_ACTIONS).min() > 60
     greedy, _ = model.predict(obs.numpy(), deterministic=True)

@@ -157,7 +157,7 @@ def test_predict_is_greedy_in_the_average(tmp_path: Path) -> None:
     np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], np.ones(64))
     model.exploration_rate = 0.0
     with th.no_grad():  # as in the rollout loop
-        np.testing.assert_array_equal(model._sample_actions(th.as_tensor(obs)), np.zeros(64), "the behaviour policy is q̂'s")
+        np.testing.assert_array_equal(model._sample_actions(obs), np.zeros(64), "the behaviour policy is q̂'s")
     model.save(tmp_path / "model")
     loaded = NStepSARSA.load(tmp_path / "model", device="cpu")
     assert loaded.policy.q_net_average is not None

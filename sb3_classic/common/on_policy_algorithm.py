@@ -20,7 +20,7 @@ from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.common.utils import check_for_correct_spaces, obs_as_tensor, update_learning_rate
+from stable_baselines3.common.utils import check_for_correct_spaces, update_learning_rate
 from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_classic.common.buffers import Observations, TrajectoryBuffer, all_finite, non_finite_entries, select
@@ -418,11 +418,12 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
             th.nn.utils.clip_grad_norm_(parameters, self.max_grad_norm)
 
     @abstractmethod
-    def _sample_actions(self, obs: th.Tensor | dict[str, th.Tensor]) -> np.ndarray:
+    def _sample_actions(self, obs: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
         """
-        The behaviour policy of the per-step loop: one action per env, as a NumPy array the env accepts.
+        The behaviour policy of the per-step loop: one action per env, as a NumPy array the env accepts. Called
+        without gradient (``th.no_grad``).
 
-        :param obs: the current observations of all envs
+        :param obs: the current observations of all envs, as the VecEnv returned them
         """
 
     @abstractmethod
@@ -599,7 +600,7 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
             elif n_steps >= n_rollout_steps:
                 break
             with th.no_grad():
-                actions = self._sample_actions(obs_as_tensor(self._last_obs, self.device))  # type: ignore[arg-type]
+                actions = self._sample_actions(self._last_obs)  # type: ignore[arg-type]
             env_actions = actions
             if self._action_offset is not None:
                 # The buffer and the networks use indices 0..n-1, the env its own values start..start+n-1

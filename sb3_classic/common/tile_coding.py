@@ -413,15 +413,20 @@ class TileCoding(BaseFeaturesExtractor):
         # Hashed tiles may collide: count them, so that w·x = Σ_t w[index_t] as with tiles3
         return features.scatter_add_(1, indices, ones)
 
-    def _dense_features_numpy(self, observations: np.ndarray) -> np.ndarray:
+    def active_tiles_numpy(self, observations: np.ndarray) -> np.ndarray:
         """
-        ``forward`` for a batch on the CPU without hashing: the same float64 arithmetic as ``_coordinates`` and
-        ``_indices`` in NumPy, whose calls on a small batch cost a fraction of PyTorch's (the per-step loop computes
-        the features of one observation two or three times per env step).
+        ``active_tiles`` for NumPy observations on the CPU: the same indices, and for ``hash_size=None`` the same float64
+        arithmetic as ``_coordinates`` and ``_indices`` in NumPy, whose calls on a small batch cost a fraction of
+        PyTorch's (the per-step loop codes one observation at every env step; with a linear q̂ over these features
+        ``NStepSARSA`` sums and updates the active tiles' weights, as the book's ``tiles3`` code does).
 
-        :param observations: a batch of observations, shape (batch, *obs_shape)
-        :return: the binary tile features, shape (batch, features_dim), float32
+        :param observations: a batch of observations, shape (batch, *obs_shape), any real dtype
+        :return: the index of the active tile of each tiling, shape (batch, n_tilings), int64; with ``hash_size``,
+            hashed indices, which may repeat within a row
+        :raises ValueError: if an observation has a NaN
         """
+        if self.hash_size is not None:
+            return self.active_tiles(th.as_tensor(observations, dtype=th.float64)).numpy()
         if self._numpy_grid is None:
             grid = {name: self.get_buffer(f"_{name}").cpu().numpy() for name in self._grid_names}
             grid["width"] = grid["high"] - grid["low"]
@@ -438,9 +443,19 @@ class TileCoding(BaseFeaturesExtractor):
         quantized = np.floor(grid["tiles_per_dim"] * (x - grid["origin"]) / grid["width"] * self.n_tilings).astype(np.int64)
         from_first = (quantized[:, None, :] + grid["offsets_from_first"]) // self.n_tilings
         # As _indices: the tiling's first index + Σ_d (c_{t,d} − first_{t,d}) · stride_d, in int64 (exact)
-        indices = grid["tiling_starts"] + from_first @ grid["strides"]
-        features = np.zeros((batch, self.features_dim), dtype=np.float32)
-        features[np.arange(batch)[:, None], indices] = 1.0
+        indices: np.ndarray = grid["tiling_starts"] + from_first @ grid["strides"]
+        return indices
+
+    def _dense_features_numpy(self, observations: np.ndarray) -> np.ndarray:
+        """
+        ``forward`` for a batch on the CPU without hashing, from ``active_tiles_numpy``.
+
+        :param observations: a batch of observations, shape (batch, *obs_shape)
+        :return: the binary tile features, shape (batch, features_dim), float32
+        """
+        indices = self.active_tiles_numpy(observations)
+        features = np.zeros((len(indices), self.features_dim), dtype=np.float32)
+        features[np.arange(len(indices))[:, None], indices] = 1.0
         return features
 
     def extra_repr(self) -> str:

@@ -192,9 +192,9 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             **self.policy_kwargs,
         )
 
-    def _sample_actions(self, obs: th.Tensor | dict[str, th.Tensor]) -> np.ndarray:
+    def _sample_actions(self, obs: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
         # A ~ π(·|S, θ); the baseline v̂ is only needed at update time
-        actions = self.policy.sample_actions(obs).cpu().numpy()
+        actions = self.policy.sample_actions(obs_as_tensor(obs, self.device)).cpu().numpy()
         if isinstance(self.action_space, spaces.Box):
             # SB3's Gaussian draws flat actions (n_envs, action_dim); the env and the buffer take the space's shape
             # (as SB3's ActorCriticPolicy.forward reshapes them), e.g. (n_envs, 2, 3) for Box(shape=(2, 3))

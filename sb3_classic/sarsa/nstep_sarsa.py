@@ -7,6 +7,7 @@ import torch as th
 import torch.nn.functional as F
 from gymnasium import spaces
 from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import LinearSchedule, get_parameters_by_name, obs_as_tensor, polyak_update
 
@@ -21,6 +22,7 @@ from sb3_classic.common.returns import (
     truncated_lambda_returns,
 )
 from sb3_classic.common.schedules import ExponentialDecay
+from sb3_classic.common.tile_coding import TileCoding
 from sb3_classic.common.utils import check_bool, check_choice, check_positive_int, check_range
 from sb3_classic.sarsa.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, SARSAPolicy
 
@@ -71,9 +73,12 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
       other in time order (episode ends included), ``gradient_steps`` passes. With ``train_freq=1``, one env and
       plain SGD (``policy_kwargs=dict(optimizer_class=th.optim.SGD)``) this is the book's algorithm exactly:
       the box of §10.2, whose updates at the end of an episode are made one by one (τ = T − n + 1, …, T − 1).
-      For the book's linear methods (``net_arch=[]`` over features without parameters such as ``TileCoding``, plain
-      SGD, the MSE loss, no clipping) each such update W_a ← W_a + α[G − q̂]x(S_t) is applied to the weights directly,
-      without autograd: the same arithmetic, the same weights to the last bit, in a quarter of the time.
+      For the book's linear methods (``net_arch=[]`` over features without parameters, plain SGD, the MSE loss, no
+      clipping) each such update W_a ← W_a + α[G − q̂]x(S_t) is applied to the weights directly, without autograd: the
+      same arithmetic, the same weights to the last bit, in a quarter of the time. Over ``TileCoding`` (on the CPU)
+      the rollout's q̂ and this update go over the active tiles as the book's code does, q̂ = Σ_t W[a, i_t(s)] and
+      α[G − q̂] added to each active tile's weight, without the dense features: the same values to float32 rounding
+      (the sum's order differs), several times faster.
 
     The targets of an update are computed with the weights at its start. With ``train_freq=1`` and one env, the
     transitions that complete together are those of an episode's end, whose targets do not bootstrap, so the
@@ -333,6 +338,40 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
                 DEFAULT_EXPLORATION_FRACTION if self.exploration_fraction is None else self.exploration_fraction,
             )
         self._update_exploration_rate()
+        self._find_tile_coding()
+
+    def _find_tile_coding(self) -> None:
+        """
+        Whether the rollout and the per-step update go over the active tiles (``_tile_coded_q``), found when the model is
+        built and at the start of each ``learn()`` (the policy's modules and optimizer could have been changed in
+        between), not at every env step.
+        """
+        #: q̂'s tile coder and linear layer, if q̂ is linear over tile features on the CPU (else None)
+        self._tile_coded = self._tile_coded_q()
+        #: the same, if that layer is also trained by plain SGD on the MSE loss (``_plain_sgd_linear_layer``)
+        self._tile_sgd = self._tile_coded if self._plain_sgd_linear_layer() is not None else None
+        #: the active tiles of the last observations, by their float32 bytes (``_active_tiles``)
+        self._tiles_cache: dict[bytes, np.ndarray] = {}
+
+    def _active_tiles(self, extractor: TileCoding, observations: np.ndarray) -> np.ndarray:
+        """
+        :param extractor: q̂'s tile coder
+        :param observations: a batch of observations, shape (batch, *obs_shape)
+        :return: their active tiles (``TileCoding.active_tiles_numpy`` of the observations cast to float32, as the
+            policy's ``preprocess_obs`` casts them). With one env, the tiles of the last n + 2 observations are kept:
+            the per-step update of S_t comes n steps after the rollout coded S_t to choose A_t, and the tiles are a
+            function of the observation's values alone
+        """
+        observations = observations.astype(np.float32, copy=False)
+        if self.n_envs != 1:
+            return extractor.active_tiles_numpy(observations)
+        key = observations.tobytes()
+        tiles = self._tiles_cache.get(key)
+        if tiles is None:
+            tiles = self._tiles_cache[key] = extractor.active_tiles_numpy(observations)
+            if len(self._tiles_cache) > self.n_steps + 2:
+                del self._tiles_cache[next(iter(self._tiles_cache))]  # the oldest
+        return tiles
 
     def _make_policy(self) -> BasePolicy:
         self._refuse_policy_kwargs_set_here(target_network="target_update_interval", averaged_network="averaging_tau")
@@ -369,11 +408,15 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         uniform = np.random.randint(first_action, first_action + self.action_space.n, size=greedy_actions.shape)
         return np.where(explore, uniform, greedy_actions)
 
-    def _sample_actions(self, obs: th.Tensor | dict[str, th.Tensor]) -> np.ndarray:
+    def _sample_actions(self, obs: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
         if self.policy.own_predict:
             # A subclass's greedy policy (action masking, say), as SB3's DQN's ε-greedy takes its policy's predict
-            return self._epsilon_greedy(self.policy._predict(obs, deterministic=False).cpu().numpy().reshape(-1))
-        q_values = self.policy.q_net(obs).cpu().numpy()
+            greedy = self.policy._predict(obs_as_tensor(obs, self.device), deterministic=False)
+            return self._epsilon_greedy(greedy.cpu().numpy().reshape(-1))
+        if self._tile_coded is not None:
+            q_values = self._tile_q_values(*self._tile_coded, obs)  # type: ignore[arg-type]
+        else:
+            q_values = self.policy.q_net(obs_as_tensor(obs, self.device)).cpu().numpy()
         if self.update_mode == "per_step":
             # Kept for the bootstrap of the next update, if no update comes in between (see _next_state_values)
             self._rollout_q_values = (q_values, self._n_updates, self.num_timesteps)
@@ -640,9 +683,12 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         :param targets: G_{t:t+n}, shape (1,)
         :return: q̂(S_t, A_t) before the step, shape (1,), and the loss ½(G − q̂)², both detached
         """
+        action = int(actions[0, 0])
+        if self._tile_sgd is not None and self._tile_sgd[1] is layer:
+            q_value, loss = self._tile_sgd_step(*self._tile_sgd, observations.numpy(), action, targets.numpy()[0])  # type: ignore[union-attr]
+            return th.tensor([q_value]), th.tensor([loss])
         learning_rate = float(self.policy.optimizer.param_groups[0]["lr"])
         q_net = self.policy.q_net
-        action = int(actions[0, 0])
         with th.no_grad():
             features = q_net.extract_features(observations, q_net.features_extractor)
             q_predicted = F.linear(features, layer.weight, layer.bias)[:, action]
@@ -652,6 +698,73 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             if layer.bias is not None:
                 layer.bias[action : action + 1].add_(error, alpha=-learning_rate)
         return q_predicted, 0.5 * error.square()
+
+    def _tile_coded_q(self) -> tuple[TileCoding, th.nn.Linear] | None:
+        """
+        :return: q̂'s tile coder and layer if q̂ is linear over ``TileCoding`` features (``SARSAPolicy.linear_layer``)
+            on the CPU: the book's linear methods on Mountain Car (Figs 10.1–10.4), whose q̂ the rollout computes and
+            whose plain SGD update the per-step mode applies over the active tiles (``_tile_q_values``,
+            ``_tile_sgd_step``); else None
+        """
+        layer = self.policy.linear_layer
+        if layer is None or layer.weight.device.type != "cpu":
+            return None
+        extractor = self.policy.q_net.features_extractor
+        # (an image space would be scaled by preprocess_obs first)
+        if not isinstance(extractor, TileCoding) or (self.policy.normalize_images and is_image_space(self.observation_space)):
+            return None
+        return extractor, layer
+
+    def _tile_q_values(self, extractor: TileCoding, layer: th.nn.Linear, observations: np.ndarray) -> np.ndarray:
+        """
+        q̂(s, ·, w) = W x(s) (+ b) for binary tile features as the book's code computes it: the sum of the active tiles'
+        weights, Σ_t W[a, i_t(s)] (S&B §9.5.4, the ``tiles3`` code's ``sum(w[tiles])``), without the dense x(s) and a
+        matrix product over its n_tilings × tiles_per_tiling entries. The same values as the dense product to float32
+        rounding (another order of summation), at a fraction of the cost of PyTorch's calls on one observation.
+
+        :param extractor: q̂'s tile coder
+        :param layer: q̂'s linear layer
+        :param observations: a batch of observations, shape (batch, *obs_shape)
+        :return: q̂(s, ·) of each, shape (batch, n_actions), float32
+        """
+        tiles = self._active_tiles(extractor, observations)
+        q_values: np.ndarray = layer.weight.detach().numpy()[:, tiles].sum(axis=-1).T
+        if layer.bias is not None:
+            q_values = q_values + layer.bias.detach().numpy()
+        return q_values
+
+    def _tile_sgd_step(
+        self, extractor: TileCoding, layer: th.nn.Linear, observation: np.ndarray, action: int, target: np.floating
+    ) -> tuple[float, float]:
+        """
+        ``_linear_sgd_step`` over tile features: W_a ← W_a + α[G − q̂(S_t, A_t, w)] x(S_t) (S&B eq. 10.5 with
+        ∇q̂ = x, §9.4) adds α[G − q̂] to the weight of each active tile i_t(S_t) (and to b_a), as the book's code for
+        Mountain Car does; a hashed tile met by k tilings gets it k times, as its feature is k. The arithmetic of
+        autograd's gradient and ``torch.optim.SGD``'s step in float32, with q̂ summed over the active tiles
+        (``_tile_q_values``): the weights agree with theirs to float32 rounding (``tests/test_book_updates.py``).
+
+        :param extractor: q̂'s tile coder
+        :param layer: q̂'s linear layer
+        :param observation: S_t, a batch of one, shape (1, *obs_shape)
+        :param action: A_t as an index
+        :param target: G_{t:t+n}, float32
+        :return: q̂(S_t, A_t) before the step and the loss ½(G − q̂)²
+        """
+        learning_rate = np.float32(self.policy.optimizer.param_groups[0]["lr"])
+        tiles = self._active_tiles(extractor, observation)[0]
+        weights = layer.weight.detach().numpy()[action]  # a view: the update changes the parameter itself
+        bias = None if layer.bias is None else layer.bias.detach().numpy()
+        q_value = weights[tiles].sum() + (bias[action] if bias is not None else np.float32(0.0))
+        # ∂½(G − q̂)²/∂W_a = (q̂ − G) x(S_t): SGD adds −α(q̂ − G) to each active tile's weight (once per tiling)
+        error = q_value - np.float32(target)
+        step = -learning_rate * error
+        if extractor.hash_size is None:
+            weights[tiles] += step  # (one tile per tiling, all distinct)
+        else:
+            np.add.at(weights, tiles, step)
+        if bias is not None:
+            bias[action] += step
+        return float(q_value), float(np.float32(0.5) * error * error)
 
     def train(self) -> None:
         """Update q̂ towards the n-step targets of every transition whose target is known and not trained on yet."""
@@ -708,15 +821,18 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         :param q_predicted: q̂(S_t, A_t) of its transitions before its first gradient step
         :param targets: their targets G_{t:t+n}
         """
-        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         # One conversion to Python floats and the means there: each .item() or .mean() costs as much as a small tensor
         # op, and this runs every env step in the per-step mode (2 µs instead of 7)
         values = th.cat((loss.reshape(1), q_predicted, targets)).tolist()
-        n_transitions = len(targets)
-        self.logger.record("train/loss", values[0])
-        self.logger.record("train/q_mean", math.fsum(values[1 : 1 + len(q_predicted)]) / len(q_predicted))
-        self.logger.record("train/target_mean", math.fsum(values[1 + len(q_predicted) :]) / n_transitions)
-        self.logger.record("train/n_transitions", n_transitions)
+        self._record_values(values[0], values[1 : 1 + len(q_predicted)], values[1 + len(q_predicted) :])
+
+    def _record_values(self, loss: float, q_predicted: list[float], targets: list[float]) -> None:
+        """``_record_update`` with the values as Python floats."""
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        self.logger.record("train/loss", loss)
+        self.logger.record("train/q_mean", math.fsum(q_predicted) / len(q_predicted))
+        self.logger.record("train/target_mean", math.fsum(targets) / len(targets))
+        self.logger.record("train/n_transitions", len(targets))
 
     def _book_loop_step(self) -> bool:
         """
@@ -742,7 +858,20 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         # q̂(S_t, A_t), or Σ_a π(a|S_t) q̂(S_t, a) (Expected SARSA), of the step just taken
         bootstrap = self._sarsa_values(last_step_q, buffer.actions[pos - 1 : pos, 0])
         # G_{t:t+n} = R_{t+1} + … + γ^{n−1}R_{t+n} + γ^n q̂(S_{t+n}, A_{t+n}) (S&B eq. 10.4), float32, shape (1,)
-        target = th.as_tensor(window.reward_sum + window.bootstrap_discount * bootstrap, device=self.device)
+        target_value = window.reward_sum + window.bootstrap_discount * bootstrap
+        if self._tile_sgd is not None:
+            # (no tensors at all: the book's Mountain Car, where they would cost more than the update; tile coding
+            # takes Box observations, an array)
+            observations: np.ndarray = buffer.observations  # type: ignore[assignment]
+            q_value, loss_value = self._tile_sgd_step(
+                *self._tile_sgd, observations[start : start + 1, 0], int(buffer.actions[start, 0]), target_value[0]
+            )
+            self._update_average()
+            buffer.mark_trained(1)
+            self._n_updates += 1
+            self._record_values(loss_value, [q_value], [float(target_value[0])])
+            return True
+        target = th.as_tensor(target_value, device=self.device)
         observation = obs_as_tensor(select(buffer.observations, (slice(start, start + 1), 0)), self.device)
         action = th.as_tensor(buffer.actions[start : start + 1, 0].reshape(-1, 1), device=self.device)
         q_predicted, loss = self._gradient_step(observation, action, target)
@@ -753,6 +882,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         return True
 
     def _on_learn_start(self) -> None:
+        self._find_tile_coding()
         # num_timesteps may have been reset: the bootstrap network's next copy counts from here
         self._target_updated_at = min(self._target_updated_at, self.num_timesteps)
         # A linear ε restarts with this learn() call from its first step (SB3's DQN), not after the first rollout
@@ -762,8 +892,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         return ', "auto" (every 128 env steps per env)'
 
     def _excluded_save_params(self) -> list[str]:
-        # A cache of the rollout loop's last forward pass, not training state
-        return [*super()._excluded_save_params(), "_rollout_q_values"]
+        # A cache of the rollout loop's last forward pass, and references to the policy's modules (_find_tile_coding):
+        # not training state
+        return [*super()._excluded_save_params(), "_rollout_q_values", "_tile_coded", "_tile_sgd", "_tiles_cache"]
 
     def learn(
         self: SelfNStepSARSA,
