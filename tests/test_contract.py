@@ -382,6 +382,23 @@ INVALID_ARGUMENTS = [
     # A DQN user's argument alone: the default exponential schedule would ignore it
     (NStepSARSA, dict(exploration_fraction=0.2), "exploration_fraction=0.2 .* exploration_schedule='linear'"),
     (NStepSARSA, dict(exploration_schedule="linear", exploration_fraction=0.0), "exploration_fraction=0.0"),
+    # (silently ignored before: the linear schedule has no per-episode factor)
+    (
+        NStepSARSA,
+        dict(exploration_schedule="linear", exploration_decay_rate=0.99),
+        "exploration_decay_rate=0.99 .*exploration_schedule='exponential'",
+    ),
+    # (torch's "got multiple values for keyword argument 'lr'" before)
+    (
+        NStepSARSA,
+        dict(policy_kwargs=dict(optimizer_kwargs=dict(lr=1e-3))),
+        r"optimizer_kwargs=dict\(lr=0.001\).* learning_rate=",
+    ),
+    (
+        REINFORCE,
+        dict(policy_kwargs=dict(optimizer_kwargs=dict(lr=1e-3))),
+        r"optimizer_kwargs=dict\(lr=0.001\).* value_learning_rate",
+    ),
     (NStepSARSA, dict(learning_rate=0.0), "learning_rate=0.0 must be finite and > 0"),
     (NStepSARSA, dict(gamma=-0.1), "gamma=-0.1"),
     (NStepSARSA, dict(train_freq=0), "train_freq=0"),

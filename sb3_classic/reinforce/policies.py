@@ -86,6 +86,8 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         # SB3's ActorCriticPolicy takes their truth: share_features_extractor="False" would share it
         check_bool("share_features_extractor", share_features_extractor)
         check_bool("normalize_images", normalize_images)
+        # (checked before ActorCriticPolicy builds an optimizer of its own with them)
+        optimizer_kwargs_with_defaults(optimizer_class, optimizer_kwargs)
         super().__init__(
             observation_space,
             action_space,

@@ -48,6 +48,8 @@ def _polyak_update(source: th.nn.Module, copy: th.nn.Module, tau: float, statist
 
 # The linear ε schedule's, when exploration_fraction is None (SB3's DQN's default)
 DEFAULT_EXPLORATION_FRACTION = 0.1
+# The exponential ε schedule's per-episode factor (the constructor's default)
+DEFAULT_EXPLORATION_DECAY_RATE = 0.995
 # Env steps per env between two logger dumps with learn()'s default log_interval ("auto")
 LOG_EVERY_STEPS = 128
 
@@ -193,7 +195,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         exploration_initial_eps: float = 1.0,
         exploration_final_eps: float = 0.05,
         exploration_fraction: float | None = None,
-        exploration_decay_rate: float = 0.995,
+        exploration_decay_rate: float = DEFAULT_EXPLORATION_DECAY_RATE,
         target_update_interval: int | None = None,
         tau: float = 1.0,
         averaging_tau: float | None = None,
@@ -291,6 +293,13 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
                 "decay ε linearly over that fraction of training, or drop exploration_fraction"
             )
         check_range("exploration_decay_rate", self.exploration_decay_rate, 0.0, 1.0, low_open=True)
+        if self.exploration_schedule == "linear" and self.exploration_decay_rate != DEFAULT_EXPLORATION_DECAY_RATE:
+            raise ValueError(
+                f"exploration_decay_rate={self.exploration_decay_rate!r} is the exponential schedule's (ε ← max(ε_final, "
+                "ε · exploration_decay_rate) per episode), but exploration_schedule is 'linear' (ε from initial to final "
+                "over exploration_fraction of training), which would ignore it. Pass exploration_schedule='exponential' "
+                "to decay ε per episode, or drop exploration_decay_rate"
+            )
         if self.exploration_schedule == "exponential" and self.exploration_initial_eps < self.exploration_final_eps:
             raise ValueError(
                 f"exploration_initial_eps={self.exploration_initial_eps!r} is below exploration_final_eps="
