@@ -54,8 +54,9 @@ HEADER = f"""Median µs per call (`torch.utils.benchmark`, 1 thread, CPU), netwo
   with `REINFORCEPolicy.sample_actions(obs)`, which makes the same draw.
 
 - *NStepSARSA per-step linear update*: one transition's update W_a ← W_a + α[G − q̂]x(S) of a linear q̂ over the tile
-  coding of Figs 10.1–10.4 (Mountain Car, 8 tilings of 8 × 8), plain SGD: through autograd and `torch.optim.SGD`, and
-  applied directly (the same weights to the last bit).
+  coding of Figs 10.1–10.4 (Mountain Car, 8 tilings of 8 × 8), plain SGD: through autograd and `torch.optim.SGD`,
+  applied directly to the dense features (the same weights to the last bit), and over the active tiles as the book's
+  code does (the same weights to float32 rounding; the observation's tiles cached, as the rollout leaves them).
 
 Speed-up: the first variant of each path divided by this one."""
 
@@ -107,19 +108,29 @@ def reinforce_samplers(env_id: str, n_envs: int) -> dict[str, Callable[[], th.Te
 
 
 def linear_sgd_updates() -> dict[str, Callable[[], None]]:
-    """:return: one per-step update of a linear q̂ over tile coding with plain SGD, through autograd and directly"""
+    """
+    :return: one per-step update of a linear q̂ over tile coding with plain SGD: through autograd, applied directly to
+        the dense features, and over the active tiles (the observation's tiles cached, as the rollout leaves them)
+    """
     tiles = dict(n_tilings=8, tiles_per_dim=8, low=(-1.2, -0.07), high=(0.5, 0.07))
     policy_kwargs = dict(
         net_arch=[], with_bias=False, weight_init=0.0, optimizer_class=th.optim.SGD,
         features_extractor_class=TileCoding, features_extractor_kwargs=tiles,
     )  # fmt: skip
     updates: dict[str, Callable[[], None]] = {}
-    for variant, direct in (("autograd + torch.optim.SGD", False), ("applied directly (sb3_classic's)", True)):
+    variants = (
+        ("autograd + torch.optim.SGD", "autograd"),
+        ("applied directly to the dense features", "dense"),
+        ("over the active tiles (sb3_classic's)", "tiles"),
+    )
+    for variant, path in variants:
         model = NStepSARSA(
             "MlpPolicy", LINEAR_ENV_ID, learning_rate=0.3 / 8, update_mode="per_step", policy_kwargs=policy_kwargs,
             seed=0, device="cpu",
         )  # fmt: skip
-        if not direct:
+        if path != "tiles":
+            model._tile_sgd = None  # (set when the model is built and at each learn(): this one never learns)
+        if path == "autograd":
             model._plain_sgd_linear_layer = lambda: None  # type: ignore[method-assign]
         # One transition: an observation, its action and its target (the weights move at every call, as in training)
         updates[variant] = functools.partial(

@@ -357,10 +357,19 @@ def test_hot_paths_command_line(tmp_path: Path) -> None:
     # 3 Adam implementations, then SB3's and REINFORCE's sampling for 1 and for 8 envs
     assert len(rows) == len(hot_paths.ADAM_VARIANTS) + 4
     assert [row[-1] for row in rows if row[2].startswith(("Adam, loop", "SB3"))] == ["1.00× |"] * 3
-    # Then the linear update of Mountain Car's tile coding, through autograd and directly
+    # Then the linear update of Mountain Car's tile coding: through autograd, directly on the dense features, over the tiles
     linear = [line.split(" | ") for line in lines if "MountainCar-v0" in line]
-    assert [row[2] for row in linear] == ["autograd + torch.optim.SGD", "applied directly (sb3_classic's)"]
+    variants = [
+        "autograd + torch.optim.SGD",
+        "applied directly to the dense features",
+        "over the active tiles (sb3_classic's)",
+    ]
+    assert [row[2] for row in linear] == variants
     assert all(float(row[3]) > 0 for row in rows + linear)
+    # Each variant's model takes its own path
+    models = [update.func.__self__ for update in hot_paths.linear_sgd_updates().values()]  # type: ignore[attr-defined]
+    assert [model._plain_sgd_linear_layer() is not None for model in models] == [False, True, True]
+    assert [model._tile_sgd is not None for model in models] == [False, False, True]
 
 
 def test_run_one_trains_once_and_caches(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
