@@ -827,7 +827,13 @@ def settings_table(plan: Plan, figure: str, cache_dir: Path, versions: str) -> s
             last = plan.mountain_car_first if figure == "10.4" else plan.mountain_car_episodes
             measure = fmt(*group.window("lengths", 1, last)[:2], 1) + f" steps, episodes 1–{last}"
         elif figure == "10.1":
-            measure = f"{sum(run['num_timesteps'] for run in group.data):,} steps in {max(plan.snapshots)} episodes"
+            # Each run's env steps over its episodes (the sum over runs was shown before, under "mean ± SE")
+            steps = np.array([run["num_timesteps"] for run in group.data], dtype=float)
+            episodes = max(plan.snapshots)
+            measure = "–" if len(steps) == 0 else f"{steps.mean():,.0f}"
+            if len(steps) > 1:
+                measure += f" ± {steps.std(ddof=1) / math.sqrt(len(steps)):,.0f}"
+            measure += f" steps in {episodes} episode{'s' if episodes != 1 else ''}"
         else:
             last = plan.corridor_episodes
             measure = fmt(*group.window("returns", 1, last)[:2], 2) + f" return, episodes 1–{last}"
@@ -899,6 +905,14 @@ def write_report(
             f"## Fig {figure}\n\n{FIGURE_NOTES[figure]}\n\n{settings_table(plan, figure, cache_dir, versions)}\n{image}"
         )
     runs = ", ".join(f"Fig {figure}: {plan.runs[figure]}" for figure in figures)
+    if (plan.mountain_car_episodes, plan.corridor_episodes) == (DEFAULT.mountain_car_episodes, DEFAULT.corridor_episodes):
+        not_reduced = "The settings not reduced: episodes per run, α of the named settings, initial weights, γ = 1, ε = 0."
+    else:
+        not_reduced = (
+            f"Episodes per run are cut too (Fig 10.3: {plan.mountain_car_episodes}, Fig 10.4: {plan.mountain_car_first}, "
+            f"Figs 13.1–13.2: {plan.corridor_episodes}; `--quick`): a test of the pipeline, whose numbers are not the "
+            "figures' (the measures that need later episodes are empty, and so are the plots that need them)."
+        )
     spent = (
         f" This invocation trained for {cpu_seconds / 60:.1f} CPU minutes (runs already cached not counted)."
         if cpu_seconds
@@ -930,8 +944,7 @@ checked against the book's box run in NumPy, see its notes).
 
 Reduced against the book, to fit a few minutes on 2 cores (`--runs 100` and `--full-grid` give the book's
 run counts and α grids): the α grids of Figs 7.2 and 10.4 are the points around each n's optimum; Fig 10.1 stops at
-episode {max(plan.snapshots)}; run counts are above. The settings not reduced: episodes per run, α of the named
-settings, initial weights, γ = 1, ε = 0.
+episode {max(plan.snapshots)}; run counts are above. {not_reduced}
 
 How the models are built (public API only, `benchmarks/textbook.py`'s `make_model`):
 

@@ -399,6 +399,12 @@ INVALID_ARGUMENTS = [
         dict(policy_kwargs=dict(optimizer_kwargs=dict(lr=1e-3))),
         r"optimizer_kwargs=dict\(lr=0.001\).* value_learning_rate",
     ),
+    # (Adam's "unexpected keyword argument 'learning_rate'" before, with a hint about the policy's arguments)
+    (
+        REINFORCE,
+        dict(policy_kwargs=dict(optimizer_kwargs=dict(learning_rate=1e-3))),
+        r"optimizer_kwargs=dict\(learning_rate=0.001\).* drop learning_rate",
+    ),
     (NStepSARSA, dict(learning_rate=0.0), "learning_rate=0.0 must be finite and > 0"),
     (NStepSARSA, dict(gamma=-0.1), "gamma=-0.1"),
     (NStepSARSA, dict(train_freq=0), "train_freq=0"),

@@ -44,6 +44,23 @@ def test_quick_pipeline_end_to_end(tmp_path: Path) -> None:
     settings = {setting for run in textbook.plan_runs(textbook.QUICK, textbook.FIGURES) for setting in [run.setting]}
     assert len(list((tmp_path / "cache").rglob("seed_0.json"))) == len(settings)
     assert not list((tmp_path / "cache").rglob("seed_1.json"))
+    # The quick plan says it cuts the episodes (it said "The settings not reduced: episodes per run")
+    assert "Episodes per run are cut too" in report
+    assert "The settings not reduced" not in report
+
+
+def test_fig_10_1_gives_the_mean_steps_of_its_runs(tmp_path: Path) -> None:
+    """Fig 10.1's row of two runs: the mean of their env steps ± its SE (it showed their sum, under "mean ± SE")."""
+    results = tmp_path / "results"
+    command = [sys.executable, "-m", "benchmarks.textbook", "--quick", "--figures", "10.1", "--runs", "2", "--workers", "1"]
+    command += ["--cache-dir", str(tmp_path / "cache"), "--results-dir", str(results)]
+    completed = subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True, timeout=240, check=False)
+    assert completed.returncode == 0, completed.stderr[-3000:]
+    steps = [json.loads(path.read_text())["num_timesteps"] for path in sorted((tmp_path / "cache").rglob("seed_*.json"))]
+    assert len(steps) == 2
+    assert steps[0] != steps[1], "the two runs should differ (seeds 0 and 1)"
+    mean, se = np.mean(steps), np.std(steps, ddof=1) / np.sqrt(2)
+    assert f"| 2 | {mean:,.0f} ± {se:,.0f} steps in 1 episode |" in (results / "textbook.md").read_text()
 
 
 def test_corridor_starts_from_the_books_policy() -> None:

@@ -238,6 +238,7 @@ def test_multidimensional_box_is_flattened() -> None:
 # --- Hashing -----------------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.filterwarnings("ignore:TileCoding. hash_size=.* is below n_tilings")
 @pytest.mark.parametrize("hash_size", [1, 7, 4096, HASH_MODULUS])
 def test_hashed_features(hash_size: int) -> None:
     space = spaces.Box(np.array([-1.2, -0.07], dtype=np.float32), np.array([0.6, 0.07], dtype=np.float32))
@@ -416,3 +417,28 @@ def test_cpu_features_equal_the_tile_indices(origin: str) -> None:
     assert features.dtype == th.float32
     expected = th.zeros_like(features).scatter_(1, coder.active_tiles(th.as_tensor(points)), 1.0)
     assert th.equal(features, expected)
+
+
+def test_tilings_that_coincide_and_too_small_hashes_warn() -> None:
+    """
+    n_tilings = 3 on two dimensions displaces the tilings by t·3/3 of a tile along the second: whole tiles, so all
+    three coincide there (counted below); hash_size < n_tilings collides every observation's tiles. Both warn.
+    """
+    velocities = np.stack([np.zeros(2000), np.linspace(0.0, 5.0, 2000)], axis=1).astype(np.float32)
+    with pytest.warns(UserWarning, match=r"n_tilings=3 shares the factor 3 with dimension 1's offset 3.* 1 of the 3"):
+        three = TileCoding(BOX, n_tilings=3)
+    cells = {tuple(row) for row in three.active_tiles_numpy(velocities).tolist()}
+    single = {row[0] for row in three.active_tiles_numpy(velocities).tolist()}
+    assert len(cells) == len(single), "the three tilings cut the velocity axis at the same places"
+    with pytest.warns(UserWarning, match=r"n_tilings=6 .* 2 of the 6 tilings are distinct"):
+        TileCoding(BOX, n_tilings=6)
+    with pytest.warns(
+        UserWarning, match=r"hash_size=4 is below n_tilings=8: every observation's 8 tiles collide in 4 features"
+    ):
+        TileCoding(BOX, hash_size=4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        eight = TileCoding(BOX, n_tilings=8)  # powers of 2: odd offsets never share a factor with them
+        TileCoding(spaces.Box(0.0, 1.0, (1,)), n_tilings=5)  # one dimension: offset 1
+        TileCoding(BOX, hash_size=8)
+    assert len({tuple(row) for row in eight.active_tiles_numpy(velocities).tolist()}) > 4 * len(single)

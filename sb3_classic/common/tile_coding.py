@@ -105,10 +105,30 @@ def _check_grid(
     if not all(lo < hi for lo, hi in zip(lows, highs, strict=True)):
         raise ValueError(f"low={lows} must be below high={highs} in every dimension")
     if hash_size is not None:
-        check_positive_int("hash_size", hash_size, "or None for the dense features")
+        check_positive_int("hash_size", hash_size, "Pass None for the dense features")
         if hash_size > HASH_MODULUS:
             raise ValueError(f"hash_size={hash_size} must be <= {HASH_MODULUS} (2^31 − 1, the modulus of the hash)")
     check_choice("origin", origin, ORIGINS)
+    # Tiling t is displaced by t·(2d + 1)/n_tilings of a tile along dimension d: with a common factor g, only
+    # n_tilings/g of the displacements differ modulo a tile, and the other tilings repeat them (tiles3 does the same)
+    shared = [(d, math.gcd(2 * d + 1, n_tilings)) for d in range(n_dims) if math.gcd(2 * d + 1, n_tilings) > 1]
+    if shared:
+        d, factor = shared[0]
+        advised = 2 ** max(2, math.ceil(math.log2(4 * n_dims)))
+        warnings.warn(
+            f"TileCoding: n_tilings={n_tilings} shares the factor {factor} with dimension {d}'s offset {2 * d + 1} (tiling "
+            f"t is displaced by t·(2d + 1)/n_tilings of a tile): along dimension {d} only {n_tilings // factor} of the "
+            f"{n_tilings} tilings are distinct (dimensions {[dim for dim, _ in shared]}), which lowers the resolution "
+            f"there. Sutton & Barto §9.5.4 advise a power of 2 at least 4 × n_dims, e.g. n_tilings={advised}",
+            stacklevel=4,
+        )
+    if hash_size is not None and hash_size < n_tilings:
+        warnings.warn(
+            f"TileCoding: hash_size={hash_size} is below n_tilings={n_tilings}: every observation's {n_tilings} "
+            f"tiles collide in {hash_size} features. Pass a hash_size well above the number "
+            "of tiles visited (e.g. 4096, as the book's IHT for Mountain Car), or None for the dense features",
+            stacklevel=4,
+        )
     dense_size = n_tilings * math.prod(int(n) + 1 for n in tiles)
     if hash_size is None and dense_size > MAX_DENSE_FEATURES:
         raise ValueError(
@@ -120,8 +140,9 @@ def _check_grid(
     if hash_size is None and dense_size > SLOW_DENSE_FEATURES:
         warnings.warn(
             f"TileCoding: n_tilings={n_tilings} tilings of Π(tiles_per_dim + 1) tiles over {n_dims} dimensions are "
-            f"{dense_size:,} dense features: every env step reads and updates q̂'s {dense_size:,} weights per action "
-            "(milliseconds each on a CPU). Pass hash_size (e.g. 4096, as the book's IHT for Mountain Car) to hash the "
+            f"{dense_size:,} dense features: every forward pass over them (predict, the batch mode's updates, any network "
+            f"but a linear q̂ over the tiles in the per-step mode) reads {dense_size:,} weights per output (milliseconds "
+            "on a CPU). Pass hash_size (e.g. 4096, as the book's IHT for Mountain Car) to hash the "
             "tiles to that many features, or fewer tiles_per_dim",
             stacklevel=4,
         )

@@ -219,15 +219,17 @@ def optimizer_kwargs_with_defaults(
     :param optimizer_class: the optimizer class
     :param optimizer_kwargs: the policy's ``optimizer_kwargs``
     :return: a new dict (the policy's ``optimizer_kwargs`` are saved with the model as given)
-    :raises ValueError: if they set ``lr``, which the algorithm's learning rate sets
+    :raises ValueError: if they set ``lr`` (or ``learning_rate``), which the algorithm's learning rate sets
     """
     kwargs = dict(optimizer_kwargs or {})
-    if "lr" in kwargs:
-        # (torch's own error would be "got multiple values for keyword argument 'lr'", from deep in the policy)
+    for key in {"lr", "learning_rate"} & kwargs.keys():
+        # (torch's own error would be "got multiple values for keyword argument 'lr'", or an unexpected keyword
+        # argument 'learning_rate', from deep in the policy)
         raise ValueError(
-            f"policy_kwargs=dict(optimizer_kwargs=dict(lr={kwargs['lr']!r})): the step size is the algorithm's "
+            f"policy_kwargs=dict(optimizer_kwargs=dict({key}={kwargs[key]!r})): the step size is the algorithm's "
             "learning_rate (and REINFORCE's value_learning_rate for v̂), which sets the optimizer's lr before every "
-            "update (a float or an SB3 schedule). Pass learning_rate=... instead, and drop lr from optimizer_kwargs"
+            f"update (a float or an SB3 schedule). Pass learning_rate=... to the algorithm instead, and drop {key} from "
+            "optimizer_kwargs"
         )
     if issubclass(optimizer_class, (th.optim.Adam, th.optim.AdamW)) and not {"fused", "foreach"} & kwargs.keys():
         kwargs["fused"] = True
