@@ -18,8 +18,10 @@ import pytest
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.vec_env import DummyVecEnv
+from stable_baselines3.dqn.policies import QNetwork
 
 from sb3_classic import REINFORCE, NStepSARSA, TileCoding
+from sb3_classic.sarsa.policies import SARSAPolicy
 
 N_ACTIONS, N_FEATURES = 3, 4
 # Episodes of 1 to 9 steps: shorter and longer than n, and a one-step episode
@@ -458,3 +460,53 @@ def test_per_step_and_normalize_advantage_are_refused() -> None:
         REINFORCE("MlpPolicy", "CartPole-v1", update_mode="per_step", normalize_advantage=True)
     with pytest.raises(ValueError, match="update_mode='per-step' must be one of"):
         NStepSARSA("MlpPolicy", "CartPole-v1", update_mode="per-step")
+
+
+def test_direct_updates_only_where_they_are_what_autograd_would_do() -> None:
+    """
+    The direct paths stand for q̂ = W x(s) and autograd's SGD step; they are not taken where those are something else:
+    a TileCoding subclass with features of its own (its q̂ was 8× the policy's, its weights went to NaN), a QNetwork
+    subclass with its own forward (from make_q_net), a frozen bias (it was updated), or a layer outside the optimizer.
+    """
+
+    class ScaledTiles(TileCoding):
+        def forward(self, observations: th.Tensor) -> th.Tensor:
+            return super().forward(observations) / self.n_tilings
+
+    class HalfQ(QNetwork):
+        def forward(self, obs: th.Tensor) -> th.Tensor:  # type: ignore[override]
+            return 0.5 * super().forward(obs)
+
+    class HalfPolicy(SARSAPolicy):
+        def make_q_net(self) -> QNetwork:
+            q_net = super().make_q_net()
+            q_net.__class__ = HalfQ
+            return q_net
+
+    tiles = dict(features_extractor_class=TileCoding, features_extractor_kwargs=MOUNTAIN_CAR_TILES)
+    scaled_tiles = dict(features_extractor_class=ScaledTiles, features_extractor_kwargs=MOUNTAIN_CAR_TILES)
+    scaled = NStepSARSA("MlpPolicy", "MountainCar-v0", policy_kwargs=linear_sgd(**scaled_tiles), device="cpu")
+    assert scaled._tile_coded is None
+    assert scaled._plain_sgd_linear_layer() is not None  # (its dense features, through the policy's forward)
+    half = NStepSARSA(HalfPolicy, "MountainCar-v0", policy_kwargs=linear_sgd(**tiles), device="cpu")
+    assert half.policy.linear_layer is None
+    assert half._tile_coded is None
+    assert half._plain_sgd_linear_layer() is None
+
+    frozen = tile_coded_sarsa(with_bias=True)
+    layer = frozen.policy.linear_layer
+    assert layer is not None
+    assert layer.bias is not None
+    bias = layer.bias
+    bias.requires_grad_(False)
+    with th.no_grad():
+        bias.fill_(0.25)
+    frozen.learn(500)
+    assert frozen._tile_sgd is None
+    assert frozen._plain_sgd_linear_layer() is None
+    np.testing.assert_array_equal(bias.detach().numpy(), np.full(3, 0.25, dtype=np.float32))
+    assert layer.weight.abs().max() > 0.1, "the weights, not frozen, should have moved"
+
+    outside = tile_coded_sarsa()
+    outside.policy.optimizer = th.optim.SGD([th.nn.Parameter(th.zeros(1))], lr=0.1)
+    assert outside._plain_sgd_linear_layer() is None

@@ -659,8 +659,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     def _plain_sgd_linear_layer(self) -> th.nn.Linear | None:
         """
         :return: q̂'s layer if q̂ is linear (``SARSAPolicy.linear_layer``) and trained by plain SGD (no momentum, weight
-            decay, ``maximize``, fused or foreach implementation) on the MSE loss without gradient clipping: the
-            book's linear methods, whose update ``_linear_sgd_step`` applies without autograd; else None
+            decay, ``maximize``, fused or foreach implementation, every parameter of the layer in it and not frozen) on
+            the MSE loss without gradient clipping: the book's linear methods, whose update ``_linear_sgd_step``
+            applies without autograd; else None
         """
         layer = self.policy.linear_layer
         optimizer = self.policy.optimizer
@@ -674,7 +675,10 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             return None
         group = optimizer.param_groups[0]
         plain = not (group["momentum"] or group["weight_decay"] or group["maximize"] or group["foreach"] or group["fused"])
-        return layer if plain else None
+        # Every parameter of the layer trained by that optimizer (autograd leaves a frozen one, or one outside it, alone)
+        params = group["params"]
+        trained = all(parameter.requires_grad and any(parameter is p for p in params) for parameter in layer.parameters())
+        return layer if plain and trained else None
 
     def _linear_sgd_step(
         self, layer: th.nn.Linear, observations: th.Tensor | dict[str, th.Tensor], actions: th.Tensor, targets: th.Tensor
@@ -719,8 +723,11 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         if layer is None or layer.weight.device.type != "cpu":
             return None
         extractor = self.policy.q_net.features_extractor
-        # (an image space would be scaled by preprocess_obs first)
-        if not isinstance(extractor, TileCoding) or (self.policy.normalize_images and is_image_space(self.observation_space)):
+        # Not a subclass's own features (its forward could compute anything from the tiles), nor scaled images
+        # (preprocess_obs would divide them by 255 first)
+        if not isinstance(extractor, TileCoding) or type(extractor).forward is not TileCoding.forward:
+            return None
+        if self.policy.normalize_images and is_image_space(self.observation_space):
             return None
         return extractor, layer
 

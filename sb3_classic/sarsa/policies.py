@@ -155,14 +155,21 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
     def linear_layer(self) -> nn.Linear | None:
         """
         q̂'s only layer when q̂ is linear in its features, q̂(s, ·, w) = W x(s) (+ b): ``net_arch=[]`` over a features
-        extractor without parameters (``TileCoding``, ``FlattenExtractor``), the book's linear methods (§9.4, §10.1);
-        None otherwise. Its gradient is then ∇_{W_a} q̂(s, a, w) = x(s) (S&B §9.4, after eq. 9.8), so that the SGD update
-        is w ← w + α[U − q̂]x(s) (eq. 9.9), which ``NStepSARSA`` applies without autograd.
+        extractor without parameters (``TileCoding``, ``FlattenExtractor``), the book's linear methods (§9.4, §10.1),
+        computed by SB3's ``QNetwork`` (a subclass's own ``forward`` or ``extract_features``, from ``make_q_net``,
+        could compute anything); None otherwise. Its gradient is then ∇_{W_a} q̂(s, a, w) = x(s) (S&B §9.4, after
+        eq. 9.8), so that the SGD update is w ← w + α[U − q̂]x(s) (eq. 9.9), which ``NStepSARSA`` applies without
+        autograd.
         """
         layer: nn.Linear | None = self.__dict__["_linear_layer"]
+        if layer is None:
+            return None
+        q_net = type(self.q_net)
+        if q_net.forward is not QNetwork.forward or q_net.extract_features is not QNetwork.extract_features:
+            return None
         # (None if q̂'s layers were replaced since construction)
         modules = self.q_net.q_net._modules
-        return layer if layer is not None and len(modules) == 1 and modules.get("0") is layer else None
+        return layer if len(modules) == 1 and modules.get("0") is layer else None
 
     def _frozen_copy(self) -> QNetwork:
         """:return: a copy of q̂ as it is now, without gradients, in evaluation mode, outside the optimizer"""
