@@ -830,10 +830,11 @@ def settings_table(plan: Plan, figure: str, cache_dir: Path, versions: str) -> s
             # Each run's env steps over its episodes (the sum over runs was shown before, under "mean ± SE")
             steps = np.array([run["num_timesteps"] for run in group.data], dtype=float)
             episodes = max(plan.snapshots)
-            measure = "–" if len(steps) == 0 else f"{steps.mean():,.0f}"
+            measure = f"{steps.mean():,.0f}" if len(steps) else "–"
             if len(steps) > 1:
                 measure += f" ± {steps.std(ddof=1) / math.sqrt(len(steps)):,.0f}"
-            measure += f" steps in {episodes} episode{'s' if episodes != 1 else ''}"
+            if len(steps):
+                measure += f" steps in {episodes} episode{'s' if episodes != 1 else ''}"
         else:
             last = plan.corridor_episodes
             measure = fmt(*group.window("returns", 1, last)[:2], 2) + f" return, episodes 1–{last}"

@@ -843,7 +843,13 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self._record_values(values[0], values[1 : 1 + len(q_predicted)], values[1 + len(q_predicted) :])
 
     def _record_values(self, loss: float, q_predicted: list[float], targets: list[float]) -> None:
-        """``_record_update`` with the values as Python floats."""
+        """
+        ``_record_update`` with the values as Python floats (the tile-coded update makes no tensors).
+
+        :param loss: the mean loss of the update's gradient steps
+        :param q_predicted: q̂(S_t, A_t) of its transitions before its first gradient step
+        :param targets: their targets G_{t:t+n}
+        """
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         self.logger.record("train/loss", loss)
         self.logger.record("train/q_mean", math.fsum(q_predicted) / len(q_predicted))
