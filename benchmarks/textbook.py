@@ -3,7 +3,7 @@ The book's figures, with the package's public API (issue 12): Figs 7.2, 10.1, 10
 Barto, Reinforcement Learning: An Introduction, 2nd ed., reproduced with ``NStepSARSA`` and ``REINFORCE`` in their
 per-step mode (the book's updates, see ``tests/test_book_updates.py``), and the book's numbers beside ours.
 
-    python -m benchmarks.textbook                       # the committed results (about 7 minutes on 2 cores)
+    python -m benchmarks.textbook                       # every figure, default run counts (about 7 minutes on 2 cores)
     python -m benchmarks.textbook --quick               # the whole pipeline in a minute, into benchmarks/cache/
     python -m benchmarks.textbook --figures 7.2 13.2 --runs 100   # the book's run count for some figures
     python -m benchmarks.textbook --report-only         # redraw from the runs cached so far
@@ -409,7 +409,8 @@ FIG_7_2_NS = (1, 2, 4, 8, 16, 32, 64, 128, 256, 512)
 BOOK_RANDOM_WALK_ALPHAS = {n: tuple(round(0.1 * k, 1) for k in range(1, 11)) for n in FIG_7_2_NS}
 BOOK_MOUNTAIN_CAR_ALPHAS = {n: tuple(round(0.1 * k, 1) for k in range(1, 17)) for n in (1, 2, 4, 8, 16)}
 
-#: The committed results: about 7 minutes on 2 cores. α grids reduced to the points around the book's optimum of
+#: The default plan (the committed results used it with ``--runs 7.2=20 10.1=1 10.3=4 10.4=4 13.1=3 13.2=20``, as
+#: ``textbook.md`` says): about 7 minutes on 2 cores. α grids reduced to the points around the book's optimum of
 #: each n and a few more; run counts from the measured cost of each figure (see ``benchmarks/README.md``)
 DEFAULT = Plan(
     runs={"7.2": 20, "10.1": 1, "10.3": 4, "10.4": 4, "13.1": 10, "13.2": 20},

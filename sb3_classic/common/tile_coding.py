@@ -44,7 +44,7 @@ ORIGINS = ("low", "zero")
 HASH_MODULUS = 2**31 - 1
 #: The most dense features (``hash_size=None``) a tile coder builds: 2^24, a 64 MiB float32 row; more needs hash_size
 MAX_DENSE_FEATURES = 2**24
-#: Above this many dense features (2^20), a tile coder warns: q̂ over them takes milliseconds per env step
+#: Above this many dense features (2^20), a tile coder warns: a forward pass over them takes milliseconds
 SLOW_DENSE_FEATURES = 2**20
 _HASH_MULTIPLIER = 16_777_619
 _HASH_BASIS = 2_166_136_261 % HASH_MODULUS
@@ -140,9 +140,9 @@ def _check_grid(
     if hash_size is None and dense_size > SLOW_DENSE_FEATURES:
         warnings.warn(
             f"TileCoding: n_tilings={n_tilings} tilings of Π(tiles_per_dim + 1) tiles over {n_dims} dimensions are "
-            f"{dense_size:,} dense features: every forward pass over them (predict, the batch mode's updates, any network "
-            f"but a linear q̂ over the tiles in the per-step mode) reads {dense_size:,} weights per output (milliseconds "
-            "on a CPU). Pass hash_size (e.g. 4096, as the book's IHT for Mountain Car) to hash the "
+            f"{dense_size:,} dense features: every forward pass over them (predict; any gradient step through autograd, "
+            f"e.g. of a network with hidden layers) reads {dense_size:,} weights per output (milliseconds on a CPU). "
+            "Pass hash_size (e.g. 4096, as the book's IHT for Mountain Car) to hash the "
             "tiles to that many features, or fewer tiles_per_dim",
             stacklevel=4,
         )

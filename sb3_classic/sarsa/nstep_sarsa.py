@@ -77,8 +77,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
       the box of §10.2, whose updates at the end of an episode are made one by one (τ = T − n + 1, …, T − 1).
       For the book's linear methods (``net_arch=[]`` over features without parameters, plain SGD, the MSE loss, no
       clipping) each such update W_a ← W_a + α[G − q̂]x(S_t) is applied to the weights directly, without autograd: the
-      same arithmetic, the same weights to the last bit, in a quarter of the time. Over ``TileCoding`` (on the CPU)
-      the rollout's q̂ and this update go over the active tiles as the book's code does, q̂ = Σ_t W[a, i_t(s)] and
+      same arithmetic, the same weights to the last bit, in under half the time. Over ``TileCoding`` (on the CPU)
+      the rollout's q̂ and this update (any plain-SGD update of one transition) go over the active tiles as the book's
+      code does, q̂ = Σ_t W[a, i_t(s)] and
       α[G − q̂] added to each active tile's weight, without the dense features: the same values to float32 rounding
       (the sum's order differs), several times faster.
 
@@ -688,7 +689,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         W_a ← W_a + α [G − q̂(S_t, A_t, w)] x(S_t) (S&B eq. 10.5 with ∇q̂ = x, §9.4), applied to the one row without
         autograd. The same arithmetic as autograd's gradient of ½(G − q̂)² and ``torch.optim.SGD``'s step, so the weights
         are the same to the last bit (``tests/test_book_updates.py``) at a fraction of the cost: the per-step mode makes
-        this update at every env step (issue 12).
+        this update at every env step (issue 12). Over ``TileCoding`` it is ``_tile_sgd_step``'s, over the active tiles,
+        whose weights agree with autograd's to float32 rounding.
 
         :param layer: q̂'s linear layer (``_plain_sgd_linear_layer``)
         :param observations: S_t, a batch of one
@@ -716,8 +718,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         """
         :return: q̂'s tile coder and layer if q̂ is linear over ``TileCoding`` features (``SARSAPolicy.linear_layer``)
             on the CPU: the book's linear methods on Mountain Car (Figs 10.1–10.4), whose q̂ the rollout computes and
-            whose plain SGD update the per-step mode applies over the active tiles (``_tile_q_values``,
-            ``_tile_sgd_step``); else None
+            whose plain-SGD updates of one transition (every update of the per-step mode) apply over the active tiles
+            (``_tile_q_values``, ``_tile_sgd_step``); else None
         """
         layer = self.policy.linear_layer
         if layer is None or layer.weight.device.type != "cpu":
