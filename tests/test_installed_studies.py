@@ -63,7 +63,7 @@ def test_an_installed_user_runs_a_study_in_their_folder(tmp_path: Path) -> None:
     command = [sys.executable, "-m", "sb3_classic.studies", "my_study.yml", "--workers", "1"]
     done = subprocess.run(command, cwd=work, env=env, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stdout + done.stderr
-    assert "2 runs: 0 cached, 2 to run on 1 workers" in done.stdout
+    assert "2 runs: 0 cached, 2 to run on 1 worker" in done.stdout
 
     # The cache in ./sb3_classic-cache/, under the keys this process computes (the same code, the same keys)
     cache = work / "sb3_classic-cache"

@@ -26,7 +26,7 @@ from benchmarks.studies import SEED_REPORT_STUDIES
 from sb3_classic import REINFORCE, NStepSARSA
 from sb3_classic.harness import pool
 from sb3_classic.harness.common import RunSpec, code_versions
-from sb3_classic.harness.runner import execute_run
+from sb3_classic.harness.runner import check_run, execute_run
 from sb3_classic.studies import cli as studies_cli
 from sb3_classic.studies import outputs, stats
 from sb3_classic.studies.spec import STATED, Claim, StudyError, load_study, policy_kwargs_string
@@ -83,6 +83,42 @@ def test_policy_kwargs_string() -> None:
         policy_kwargs_string(kwargs)
         == "dict(net_arch=[256], activation_fn=nn.LeakyReLU, activation_kwargs=dict(negative_slope=0.1))"
     )
+
+
+def test_tile_coding_is_a_name_in_the_mapping_form(tmp_path: Path) -> None:
+    """
+    ``features_extractor_class: TileCoding`` in a mapping is the zoo's name, as in its string (it was the string
+    'TileCoding', and the check before any run failed with "'str' object is not callable", naming no field).
+    """
+    text = """
+title: Tiles
+env: MountainCar-v0
+algo: nstep_sarsa
+seeds: 2
+budget: {steps: 400}
+hyperparams:
+  policy: MlpPolicy
+  update_mode: per_step
+  train_freq: 1
+  gradient_steps: 1
+  policy_kwargs:
+    net_arch: []
+    with_bias: false
+    optimizer_class: th.optim.SGD
+    features_extractor_class: TileCoding
+    features_extractor_kwargs: {n_tilings: 8, tiles_per_dim: 8}
+variants:
+  n1: {n_steps: 1}
+  four_tilings: {n_steps: 1, policy_kwargs: {features_extractor_kwargs: {n_tilings: 4, tiles_per_dim: 8}}}
+claim: {text: "8 tilings beat 4", kind: better, variant: n1, others: [four_tilings]}
+"""
+    study = load_study(write_study(tmp_path, text))
+    entry = study.zoo_entry("four_tilings")
+    assert "features_extractor_class=TileCoding," in entry["policy_kwargs"]
+    assert "features_extractor_kwargs=dict(n_tilings=4, tiles_per_dim=8)" in entry["policy_kwargs"]
+    for run in study.runs():
+        if run.spec.seed == 0:
+            check_run(run.spec)  # builds the model as the zoo does: raises if the class were a string
 
 
 def test_readings_reinterpret_only_the_settings_a_variant_has(tmp_path: Path) -> None:
@@ -610,7 +646,7 @@ def test_runs_shared_by_readings_or_studies_are_run_once(tmp_path: Path, monkeyp
     status = pool.run_missing_runs(3, [shared, again, other], 1, tmp_path, Console(file=output, width=200))
     assert status is None
     assert ran == [shared, other]
-    assert "3 runs: 0 cached, 2 to run on 1 workers (1 of them the same runs as others)" in output.getvalue()
+    assert "3 runs: 0 cached, 2 to run on 1 worker (1 of them the same runs as others)" in output.getvalue()
 
 
 def fake_cache(tmp_path: Path, text: str = TINY) -> tuple[Path, Path, Path]:

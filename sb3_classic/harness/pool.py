@@ -202,7 +202,7 @@ def run_missing_runs(
     :param scheduler: a Dask scheduler's address, or None for the local pool
     :return: None when the runs are done, else the exit status to stop with (130 interrupted, 2 cluster error)
     """
-    where = f"the Dask cluster at {scheduler}" if scheduler else f"{workers} workers"
+    where = f"the Dask cluster at {scheduler}" if scheduler else f"{workers} worker{'s' if workers != 1 else ''}"
     # Runs of the same settings (a variant under two readings, two study files) share one cache entry: each is run once
     by_key: dict[str, RunSpec] = {}
     for spec in pending:

@@ -42,6 +42,7 @@ import rl_zoo3
 import yaml
 
 from sb3_classic.harness.common import THRESHOLDS, RunSpec, algorithm_defaults, register_algorithms, unknown_setting
+from sb3_classic.zoo import YAML_NAMES
 
 METRICS = ("mean_return", "last_100_return", "episodes_to_threshold")
 CLAIM_KINDS = ("better", "similar", "reaches", "below")
@@ -274,12 +275,13 @@ def merge(base: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[str, An
 def policy_kwargs_string(kwargs: Mapping[str, Any]) -> str:
     """
     :param kwargs: ``policy_kwargs`` as a mapping; strings starting with ``nn.`` or ``th.`` are Python names
-        (``nn.LeakyReLU``), other strings are strings
+        (``nn.LeakyReLU``), and so are the names the zoo's YAMLs may use (``TileCoding``: ``features_extractor_class:
+        TileCoding``); other strings are strings
     :return: the zoo's form, ``"dict(net_arch=[64, 64], activation_fn=nn.ReLU)"`` (the zoo evaluates it)
     """
 
     def code(value: Any) -> str:
-        if isinstance(value, str) and value.startswith(("nn.", "th.")):
+        if isinstance(value, str) and (value.startswith(("nn.", "th.")) or value in YAML_NAMES):
             return value
         if isinstance(value, Mapping):
             return "dict(" + ", ".join(f"{key}={code(item)}" for key, item in value.items()) + ")"
