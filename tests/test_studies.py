@@ -7,11 +7,15 @@ import hashlib
 import inspect
 import io
 import json
+import os
 import re
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
+import threading
+import time
 import warnings
 from pathlib import Path
 from typing import Any
@@ -647,6 +651,29 @@ def test_runs_shared_by_readings_or_studies_are_run_once(tmp_path: Path, monkeyp
     assert status is None
     assert ran == [shared, other]
     assert "3 runs: 0 cached, 2 to run on 1 worker (1 of them the same runs as others)" in output.getvalue()
+
+
+def test_sigterm_stops_the_runs_as_ctrl_c_does(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """
+    SIGTERM (``timeout``, a cluster job's time limit) during the runs: the message and an exit status, as Ctrl-C gets
+    (it killed the command without a word), and the previous handler back afterwards.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        pytest.skip("Python runs signal handlers in the main thread only")
+    spec = RunSpec("reinforce", "CartPole-v1", 0, 1000, 500, 2, "policy: MlpPolicy\n", label="a seed 0")
+    before = signal.getsignal(signal.SIGTERM)
+    for sent, status, message in ((signal.SIGTERM, 143, "Terminated (SIGTERM)"), (signal.SIGINT, 130, "Interrupted")):
+
+        def run_pending(specs: list[RunSpec], *args: object, signum: int = sent) -> list[RunSpec]:
+            os.kill(os.getpid(), signum)
+            time.sleep(5)  # (the handler interrupts this)
+            raise AssertionError("the signal should have stopped the runs")
+
+        monkeypatch.setattr(pool, "run_pending", run_pending)
+        output = io.StringIO()
+        assert pool.run_missing_runs(1, [spec], 1, tmp_path, Console(file=output, width=200)) == status
+        assert f"{message}: the finished runs are cached; run the same command again to resume." in output.getvalue()
+        assert signal.getsignal(signal.SIGTERM) is before
 
 
 def fake_cache(tmp_path: Path, text: str = TINY) -> tuple[Path, Path, Path]:

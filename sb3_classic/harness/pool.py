@@ -6,6 +6,8 @@ cache; ``report_missing`` names the runs that are still not there.
 
 import multiprocessing
 import queue
+import signal
+import threading
 from collections.abc import Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from contextlib import AbstractContextManager, contextmanager
@@ -200,7 +202,8 @@ def run_missing_runs(
     :param cache_dir: the cache
     :param console: where to print
     :param scheduler: a Dask scheduler's address, or None for the local pool
-    :return: None when the runs are done, else the exit status to stop with (130 interrupted, 2 cluster error)
+    :return: None when the runs are done, else the exit status to stop with (130 interrupted by Ctrl-C, 143 by SIGTERM
+        (``timeout``, a cluster job's time limit), 2 cluster error)
     """
     where = f"the Dask cluster at {scheduler}" if scheduler else f"{workers} worker{'s' if workers != 1 else ''}"
     # Runs of the same settings (a variant under two readings, two study files) share one cache entry: each is run once
@@ -212,14 +215,41 @@ def run_missing_runs(
     console.print(f"{n_runs} runs: {n_runs - len(pending)} cached, {len(distinct)} to run on {where}{shared}")
     pending = distinct
     try:
-        run_pending(pending, workers, cache_dir, console, scheduler)
+        with _sigterm_as_interrupt() as terminated:
+            run_pending(pending, workers, cache_dir, console, scheduler)
     except KeyboardInterrupt:
-        console.print("Interrupted: the finished runs are cached; run the same command again to resume.")
-        return 130
+        how = "Terminated (SIGTERM)" if terminated.is_set() else "Interrupted"
+        console.print(f"{how}: the finished runs are cached; run the same command again to resume.")
+        return 143 if terminated.is_set() else 130
     except ClusterError as error:
         console.print(f"[red]{escape(str(error))}[/red]", highlight=False)
         return 2
     return None
+
+
+@contextmanager
+def _sigterm_as_interrupt() -> Iterator[threading.Event]:
+    """
+    SIGTERM (``timeout``, a batch scheduler's time limit) stops the runs as Ctrl-C does: the pool is cancelled, the
+    finished runs stay cached, and the command says so (its default action killed the process without a word, and
+    left the pool's semaphores behind). In the main thread only, where Python runs signal handlers.
+
+    :return: an event set if SIGTERM came
+    """
+    terminated = threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield terminated
+        return
+
+    def interrupt(signum: int, frame: object) -> None:
+        terminated.set()
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield terminated
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _store(spec: RunSpec, future: "Future[RunResult]", cache_dir: Path) -> str | None:
