@@ -4,6 +4,7 @@ import re
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).parents[1]
@@ -60,5 +61,7 @@ def test_tile_coding_example_runs_as_written() -> None:
     exec(compile(example, "README.md tile coding example", "exec"), namespace)
     lengths = [episode["l"] for episode in namespace["model"].ep_info_buffer]
     assert len(lengths) >= 3
-    assert 300 < lengths[0] < 3000
-    assert lengths[-1] < lengths[0]
+    # (unseeded, as written: one of the first episodes can take 3,000 steps or more; their median is about a thousand)
+    first = float(np.median(lengths[:3]))
+    assert 300 < first < 3000
+    assert lengths[-1] < first
