@@ -111,7 +111,7 @@ def _check_grid(
     check_choice("origin", origin, ORIGINS)
     # Tiling t is displaced by t·(2d + 1)/n_tilings of a tile along dimension d: with a common factor g, only
     # n_tilings/g of the displacements differ modulo a tile, and the other tilings repeat them (tiles3 does the same)
-    shared = [(d, math.gcd(2 * d + 1, n_tilings)) for d in range(n_dims) if math.gcd(2 * d + 1, n_tilings) > 1]
+    shared = [(d, factor) for d in range(n_dims) if (factor := math.gcd(2 * d + 1, n_tilings)) > 1]
     if shared:
         d, factor = shared[0]
         advised = 2 ** max(2, math.ceil(math.log2(4 * n_dims)))

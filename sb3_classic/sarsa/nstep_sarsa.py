@@ -890,19 +890,18 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             q_value, loss_value = self._tile_sgd_step(
                 *self._tile_sgd, observations[start : start + 1, 0], int(buffer.actions[start, 0]), target_value[0]
             )
-            self._update_average()
-            buffer.mark_trained(1)
-            self._n_updates += 1
-            self._record_values(loss_value, [q_value], [float(target_value[0])])
-            return True
-        target = th.as_tensor(target_value, device=self.device)
-        observation = obs_as_tensor(select(buffer.observations, (slice(start, start + 1), 0)), self.device)
-        action = th.as_tensor(buffer.actions[start : start + 1, 0].reshape(-1, 1), device=self.device)
-        q_predicted, loss = self._gradient_step(observation, action, target)
+        else:
+            target = th.as_tensor(target_value, device=self.device)
+            observation = obs_as_tensor(select(buffer.observations, (slice(start, start + 1), 0)), self.device)
+            action = th.as_tensor(buffer.actions[start : start + 1, 0].reshape(-1, 1), device=self.device)
+            q_predicted, loss = self._gradient_step(observation, action, target)
         self._update_average()
         buffer.mark_trained(1)
         self._n_updates += 1
-        self._record_update(loss, q_predicted, target)
+        if self._tile_sgd is not None:
+            self._record_values(loss_value, [q_value], [float(target_value[0])])
+        else:
+            self._record_update(loss, q_predicted, target)
         return True
 
     def _on_learn_start(self) -> None:
