@@ -710,6 +710,33 @@ def test_the_outputs_give_each_seed_and_say_when_runs_are_missing(tmp_path: Path
     assert len(pd.read_csv(results / "study-seeds.csv")) == 3
 
 
+def test_a_budget_in_steps_shows_each_variants_fewest_and_most_episodes(tmp_path: Path) -> None:
+    # The table's Episodes were the figure's (the fewest any seed completed) while each seed's metrics were over all of
+    # its own episodes, and seeds that never reached the threshold were said to count as "the episode budget"
+    study_file, cache, results = fake_cache(tmp_path, TINY.replace("budget: {episodes: 6}", "budget: {steps: 600}"))
+    (run,) = (run for run in load_study(study_file).runs() if (run.variant, run.seed) == ("n1", 1))
+    run_dir = run.spec.run_dir(cache)
+    (run_dir / "episodes.csv").write_text("return\n" + "10.0\n" * 9)
+    command = [str(study_file), "--report-only", "--cache-dir", str(cache), "--results-dir", str(results)]
+    studies_cli.main(command)
+    summary = pd.read_csv(results / "study.csv").set_index("variant")
+    assert summary.loc["n1", ["episodes", "episodes_max"]].tolist() == [6, 9]
+    assert summary.loc["n3", ["episodes", "episodes_max"]].tolist() == [6, 6]
+    page = " ".join((results / "study.md").read_text().split())
+    assert "| `n1` | 2 | 6–9 |" in page
+    assert "| `n3` | 2 | 6 |" in page
+    assert "The table's Episodes are the fewest and the most a seed of the variant completed" in page
+    assert "count as the episodes they completed, a lower bound" in page
+    # A budget in episodes: one number, and the budget
+    (tmp_path / "episodes").mkdir()
+    study_file, cache, results = fake_cache(tmp_path / "episodes")
+    studies_cli.main([str(study_file), "--report-only", "--cache-dir", str(cache), "--results-dir", str(results)])
+    page = " ".join((results / "study.md").read_text().split())
+    assert "| `n1` | 2 | 6 |" in page
+    assert "count as the episode budget, a lower bound" in page
+    assert "A budget in env steps" not in page
+
+
 def test_runs_without_an_episode_are_said_to_be(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # A budget of 5 env steps: a seed with no episode made every mean NaN, with NumPy's "Mean of empty slice" only
     study_file, cache, results = fake_cache(tmp_path, TINY.replace("budget: {episodes: 6}", "budget: {steps: 5}"))

@@ -40,6 +40,8 @@ class StudyResults:
     :param returns: per (reading, variant), the training returns, seeds × episodes (the figure's: with a budget in
         env steps, the episodes every seed completed; the metrics are over each seed's own)
     :param seeds: per (reading, variant), the seeds found
+    :param episode_counts: per (reading, variant), the episodes each of its seeds completed (all the same with a budget
+        in episodes)
     :param metrics: per (reading, variant), ``stats.seed_metrics``
     :param verdicts: per reading, the result of each claim (absent where a variant has no run)
     :param missing: the runs not in the cache
@@ -50,6 +52,7 @@ class StudyResults:
     study: StudySpec
     returns: dict[tuple[str, str], np.ndarray] = field(default_factory=dict)
     seeds: dict[tuple[str, str], list[int]] = field(default_factory=dict)
+    episode_counts: dict[tuple[str, str], list[int]] = field(default_factory=dict)
     metrics: dict[tuple[str, str], dict[str, np.ndarray]] = field(default_factory=dict)
     verdicts: dict[str, list[stats.ClaimResult]] = field(default_factory=dict)
     missing: list[StudyRun] = field(default_factory=list)
@@ -90,6 +93,7 @@ def load_study_results(study: StudySpec, cache_dir: Path) -> StudyResults:
     for key, episodes in frames.items():
         returns = stats.seed_returns(episodes, study.budget.episodes)
         results.returns[key] = stats.returns_matrix(returns)
+        results.episode_counts[key] = [len(row) for row in returns]
         results.metrics[key] = stats.seed_metrics(returns, study.threshold, study.threshold_window)
     for reading in study.readings:
         variants = {variant: results.metrics.get((reading, variant)) for variant in study.variants}
@@ -132,11 +136,15 @@ def seeds_frame(results: StudyResults) -> pd.DataFrame:
 
 
 def summary_frame(results: StudyResults) -> pd.DataFrame:
-    """:return: one row per (reading, variant): seeds, and each metric's mean over seeds with its 95% interval"""
+    """
+    :return: one row per (reading, variant): seeds, the fewest and most episodes a seed completed (``episodes``,
+        ``episodes_max``: equal with a budget in episodes), and each metric's mean over seeds with its 95% interval
+    """
     rows = []
     for (reading, variant), metrics in results.metrics.items():
         row: dict[str, Any] = {"reading": reading, "variant": variant, "seeds": len(results.seeds[(reading, variant)])}
-        row["episodes"] = results.returns[(reading, variant)].shape[1]
+        counts = results.episode_counts[(reading, variant)]
+        row["episodes"], row["episodes_max"] = min(counts), max(counts)
         for metric in stats.METRIC_LABELS:
             value = stats.interval(metrics[metric])
             row[metric], row[f"{metric}_low"], row[f"{metric}_high"] = value.estimate, value.low, value.high
@@ -155,7 +163,8 @@ def markdown_table(results: StudyResults) -> str:
     for row in frame.itertuples(index=False):
         values = row._asdict()
         cells = [values["reading"]] if readings else []
-        cells += [f"`{values['variant']}`", str(values["seeds"]), str(values["episodes"])]
+        fewest, most = values["episodes"], values["episodes_max"]
+        cells += [f"`{values['variant']}`", str(values["seeds"]), str(fewest) if fewest == most else f"{fewest}–{most}"]
         for metric in stats.METRIC_LABELS:
             interval = stats.Interval(values[metric], values[f"{metric}_low"], values[f"{metric}_high"])
             cells.append(interval.format())
@@ -244,6 +253,7 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         "claim_texts": [claim.text for claim in study.claims],
     }
     (results_dir / f"{study.name}.json").write_text(json.dumps(record, indent=2) + "\n")
+    censored_at = "the episode budget" if study.budget.episodes is not None else "the episodes they completed"
     lines = [f"# {study.title}", ""]
     if study.source:
         lines += [f"Source: {study.source}.", ""]
@@ -262,10 +272,11 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         f"the {len(results.run_seconds)} distinct ones).",
         f"- Threshold: {study.threshold:g}, reached when the mean of {study.threshold_window} consecutive training "
         "episodes reaches it (episodes to threshold: the last episode of the first such window; seeds that never "
-        "reach it count as the episode budget, a lower bound).",
+        f"reach it count as {censored_at}, a lower bound).",
         "- Intervals: 95% bootstrap over seeds (`scipy.stats.bootstrap`, BCa); verdicts by the rule of "
         "[STUDIES.md](STUDIES.md).",
         *_short_budget_notes(study),
+        *_step_budget_notes(study),
         *_empty_run_notes(results),
         f"- Versions: {', '.join(f'{name} {version}' for name, version in code_versions(study.algo).items())}.",
         "",
@@ -452,6 +463,17 @@ def _short_budget_notes(study: StudySpec) -> list[str]:
             f"can reach the threshold, and episodes to threshold is the budget for every seed."
         )
     return notes
+
+
+def _step_budget_notes(study: StudySpec) -> list[str]:
+    """:return: what a budget in env steps makes of the table's episodes, the metrics and the figure"""
+    if study.budget.episodes is not None:
+        return []
+    return [
+        "- **A budget in env steps**: seeds complete different numbers of episodes. The table's Episodes are the "
+        "fewest and the most a seed of the variant completed; each seed's metrics are over all of its own episodes; "
+        "the figure's curves are over the first episodes, as many as every seed of the variant completed."
+    ]
 
 
 def plural(count: int, one: str, many: str) -> str:
