@@ -19,6 +19,7 @@ import pytest
 import torch as th
 from gymnasium import spaces
 from rl_zoo3.exp_manager import ExperimentManager
+from stable_baselines3 import A2C, DQN, PPO
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
@@ -119,14 +120,16 @@ OFFSET_CASES = [
 @pytest.mark.parametrize(("model_class", "space"), OFFSET_CASES)
 def test_offset_action_spaces_act_in_the_envs_values(tmp_path: Path, model_class: type[BaseAlgorithm], space: Any) -> None:
     model, env = exploring(model_class, space)
-    sampled_indices = RecordLocal("actions")
-    model.learn(400, callback=sampled_indices)
+    sampled_indices, sent = RecordLocal("actions"), RecordLocal("env_actions")
+    model.learn(400, callback=[sampled_indices, sent])
     # Every action the env received is one of its own, and all of them were tried
     assert as_set(env.received) == all_values(space)
     # What the rollout loop stores in the buffer (and the networks see) are indices 0..n-1
     indices = np.concatenate(sampled_indices.values)
     assert indices.min() == 0
     assert (indices < np.asarray(space.nvec if isinstance(space, spaces.MultiDiscrete) else space.n)).all()
+    # ... and a callback finds the env's values beside them (README)
+    np.testing.assert_array_equal(np.concatenate(sent.values), indices + np.asarray(space.start))
 
     obs = np.stack([env.observation_space.sample() for _ in range(300)])
     for deterministic in (True, False):
@@ -873,6 +876,24 @@ def test_a_model_loaded_mid_episode_without_reset_starts_new_episodes(
     assert loaded.num_timesteps > saved_steps  # the counts go on
 
 
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_a_model_loaded_without_reset_into_other_envs_starts_new_episodes(
+    tmp_path: Path, model_class: type[BaseAlgorithm]
+) -> None:
+    # load(env=<3 envs>, force_reset=False) of a model saved with 2: NumPy's "operands could not be broadcast together
+    # with shapes (2,) (3,)" at learn()
+    model = make_model(model_class, make_vec_env("CartPole-v1", n_envs=2, seed=0), seed=0)
+    model.learn(64)
+    model.save(tmp_path / "model.zip")
+    loaded: Any = model_class.load(
+        tmp_path / "model.zip", env=make_vec_env("CartPole-v1", n_envs=3, seed=1), force_reset=False, device="cpu"
+    )
+    with pytest.warns(UserWarning, match="last observations of 2 envs, and its env has 3"):
+        loaded.learn(64, reset_num_timesteps=False)
+    assert loaded.num_timesteps > model.num_timesteps
+    assert loaded._last_obs.shape[0] == 3
+
+
 @pytest.mark.parametrize(("model_class", "policy"), [(REINFORCE, ActorCriticPolicy), (NStepSARSA, DQNPolicy)])
 def test_a_policy_class_of_another_algorithm_is_named_as_such(model_class: type[BaseAlgorithm], policy: type) -> None:
     # It failed on this package's own policy_kwargs ("policy_kwargs: ... unexpected keyword argument 'weight_init'"),
@@ -881,11 +902,19 @@ def test_a_policy_class_of_another_algorithm_is_named_as_such(model_class: type[
         model_class(policy, "CartPole-v1", device="cpu")  # type: ignore[call-arg]
 
 
-@pytest.mark.parametrize(("saved_class", "loading_class"), [(REINFORCE, NStepSARSA), (NStepSARSA, REINFORCE)])
+@pytest.mark.parametrize(
+    ("saved_class", "loading_class"),
+    # DQN's file failed on its train_freq tuple ("train_freq=TrainFreq(...) must be an integer >= 1"), which the
+    # arguments' checks read before the policy class
+    [(REINFORCE, NStepSARSA), (NStepSARSA, REINFORCE), (DQN, NStepSARSA), (A2C, REINFORCE), (PPO, NStepSARSA)],
+)
 def test_a_file_of_the_other_algorithm_is_named_as_such(
     tmp_path: Path, saved_class: type[BaseAlgorithm], loading_class: type[BaseAlgorithm]
 ) -> None:
-    make_model(saved_class).save(tmp_path / "model.zip")
+    if saved_class in (REINFORCE, NStepSARSA):
+        make_model(saved_class).save(tmp_path / "model.zip")
+    else:
+        saved_class("MlpPolicy", "CartPole-v1", device="cpu").save(tmp_path / "model.zip")
     with pytest.raises(TypeError, match="saved by another algorithm"):
         loading_class.load(tmp_path / "model.zip")
     # ... and the file itself is intact

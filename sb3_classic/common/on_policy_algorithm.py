@@ -279,6 +279,11 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         return 1024
 
     def _setup_model(self) -> None:
+        # First: a file saved by another algorithm (load() takes its policy class) would otherwise fail on the first of
+        # that algorithm's arguments this one reads otherwise (DQN's train_freq tuple, say), with a misleading message
+        own_policies = tuple(self.policy_aliases.values())
+        if own_policies and not (isinstance(self.policy_class, type) and issubclass(self.policy_class, own_policies)):
+            raise TypeError(self._foreign_policy_message())
         if self.max_grad_norm is None:
             # No clipping, as the constructor stores it (load(..., max_grad_norm=None) sets None: rl-zoo3's -i)
             self.max_grad_norm = math.inf
@@ -289,9 +294,6 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         self._action_offset = action_offset(self.action_space)
         self.set_random_seed(self.seed)
         self._make_buffer()
-        own_policies = tuple(self.policy_aliases.values())
-        if own_policies and not (isinstance(self.policy_class, type) and issubclass(self.policy_class, own_policies)):
-            raise TypeError(self._foreign_policy_message())
         try:
             policy = self._make_policy()
         except TypeError as error:
@@ -703,7 +705,18 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         tb_log_name: str = "run",
         progress_bar: bool = False,
     ) -> tuple[int, BaseCallback]:
-        if not reset_num_timesteps and self._last_obs is not None and self._episodes_missing_their_start():
+        saved_envs = None if self._last_episode_starts is None else len(self._last_episode_starts)
+        if not reset_num_timesteps and self._last_obs is not None and saved_envs not in (None, self.n_envs):
+            # load(..., env=<another number of envs>, force_reset=False): the file's last observations are of other
+            # envs (NumPy's "operands could not be broadcast" otherwise)
+            warnings.warn(
+                f"This model's file holds the last observations of {saved_envs} envs, and its env has {self.n_envs}: "
+                f"{type(self).__name__} resets the envs. (load(..., force_reset=False) continues the saved envs' "
+                "episodes only with the same number of envs; the learned parameters and counts are kept)",
+                stacklevel=3,
+            )
+            self._last_obs = None
+        elif not reset_num_timesteps and self._last_obs is not None and self._episodes_missing_their_start():
             # A model loaded with force_reset=False: the file has the envs' last observations but not the buffer, so
             # the episodes in progress would be trained from where the file left them as if they began there (the
             # wrong t in γ^t and in episode lengths, REINFORCE's returns of a part of an episode)
