@@ -23,6 +23,7 @@ from stable_baselines3 import A2C, DQN, PPO
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.envs import FakeImageEnv
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor
@@ -892,6 +893,15 @@ def test_a_model_loaded_without_reset_into_other_envs_starts_new_episodes(
         loaded.learn(64, reset_num_timesteps=False)
     assert loaded.num_timesteps > model.num_timesteps
     assert loaded._last_obs.shape[0] == 3
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_a_constant_init_of_a_cnn_names_its_features_extractor(model_class: type[BaseAlgorithm]) -> None:
+    # CnnPolicy with net_arch=[] was told to pass net_arch=[]: the hidden layers are NatureCNN's
+    env = FakeImageEnv(screen_height=36, screen_width=36, n_channels=1, discrete=True)
+    expected = r"of them are in the features extractor \(NatureCNN's 4\), which net_arch=\[\] does not"
+    with pytest.raises(ValueError, match=expected):
+        model_class("CnnPolicy", env, policy_kwargs=dict(net_arch=[], weight_init=0.0), device="cpu")  # type: ignore[call-arg]
 
 
 @pytest.mark.parametrize(("model_class", "policy"), [(REINFORCE, ActorCriticPolicy), (NStepSARSA, DQNPolicy)])

@@ -322,6 +322,11 @@ BOX = spaces.Box(np.array([-1.0, 0.0], dtype=np.float32), np.array([1.0, 5.0], d
         # the tile indices overflowed int64 into negative ones, silently
         (spaces.Box(0.0, 1.0, (8,)), {}, r"3.44e\+08 dense features, more than 16,777,216 .* pass hash_size"),
         (spaces.Box(0.0, 1.0, (20,)), {}, r"dense features, more than 16,777,216 .* pass hash_size"),
+        # 400 dimensions (a flattened image): an OverflowError formatting the count (int too large to convert to float)
+        (spaces.Box(0.0, 1.0, (400,)), {}, r"3.98e\+382 dense features, more than 16,777,216 .* pass hash_size"),
+        # Bounds at the float32 limit (envs' "unbounded"): every observation fell in one tile, silently
+        (spaces.Box(-3.4e38, 3.4e38, (2,)), {}, r"low=None .* at ±3.4e\+38, envs' way of saying unbounded .* pass a finite"),
+        (spaces.Box(-1.0, 1e30, (2,)), dict(low=-1.0), r"high=None .* at ±1e\+30"),
     ],
 )
 def test_bad_arguments_raise_naming_them(space: spaces.Space, kwargs: dict, match: str) -> None:
@@ -330,6 +335,9 @@ def test_bad_arguments_raise_naming_them(space: spaces.Space, kwargs: dict, matc
 
 
 def test_numpy_counts_and_hashed_large_spaces_are_accepted() -> None:
+    # Space bounds short of "unbounded", or wide bounds replaced by the range given
+    assert TileCoding(spaces.Box(-1e29, 1e29, (2,))).high == pytest.approx((1e29, 1e29))
+    assert TileCoding(spaces.Box(-3.4e38, 3.4e38, (2,)), low=-1.0, high=1.0).high == (1.0, 1.0)
     numpy_count: Any = np.int64(8)
     assert TileCoding(BOX, tiles_per_dim=numpy_count).features_dim == TileCoding(BOX, tiles_per_dim=8).features_dim
     coder = TileCoding(spaces.Box(0.0, 1.0, (20,)), hash_size=4096)

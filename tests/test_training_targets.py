@@ -5,6 +5,7 @@ covers what the pure functions cannot: episodes and n-step windows spanning roll
 episodes at different times, rollouts shorter than n, time-limit truncations.
 """
 
+import warnings
 from typing import Any
 
 import gymnasium as gym
@@ -219,3 +220,13 @@ def test_reinforce_cuts_an_episode_that_never_ends() -> None:
     # Cut into 50-step episodes and trained on: the buffer never held more than one of them
     assert model._n_updates == 1_000 // 50
     assert model.rollout_buffer.buffer_size <= 1024
+    # The env goes on from where the cut left it in the next learn(): no reset, no warning about a file (the cut was
+    # taken for an episode missing from the buffer, as after load(force_reset=False))
+    resets: list[int] = []
+    reset = model.env.reset  # type: ignore[union-attr]
+    model.env.reset = lambda: resets.append(1) or reset()  # type: ignore[method-assign, union-attr]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        warnings.filterwarnings("ignore", message=".*max_episode_length")
+        model.learn(100, reset_num_timesteps=False)
+    assert resets == []

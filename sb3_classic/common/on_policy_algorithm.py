@@ -627,7 +627,9 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
             # Stored before the callback, so that a callback stopping training leaves the buffer consistent
             rollout_buffer.add(self._last_obs, actions, rewards, ends, truncated, final_observations)  # type: ignore[arg-type]
             self._last_obs = new_obs  # type: ignore[assignment]
-            self._last_episode_starts = dones
+            # The training episodes' starts: an episode cut at max_episode_length starts a new one where the env goes on
+            # (with the env's dones, the next learn() took the cut for the start of an episode missing from the buffer)
+            self._last_episode_starts = ends
             self._update_info_buffer(infos, dones)
             if ends.any():
                 n_episodes += int(ends.sum())

@@ -46,6 +46,9 @@ HASH_MODULUS = 2**31 - 1
 MAX_DENSE_FEATURES = 2**24
 #: Above this many dense features (2^20), a tile coder warns: a forward pass over them takes milliseconds
 SLOW_DENSE_FEATURES = 2**20
+#: Space bounds of at least this magnitude are taken as unbounded, as infinite ones are: envs give ±3.4e38 (the float32
+#: limit) for "no bound"
+UNBOUNDED = 1e30
 _HASH_MULTIPLIER = 16_777_619
 _HASH_BASIS = 2_166_136_261 % HASH_MODULUS
 
@@ -132,10 +135,10 @@ def _check_grid(
     dense_size = n_tilings * math.prod(int(n) + 1 for n in tiles)
     if hash_size is None and dense_size > MAX_DENSE_FEATURES:
         raise ValueError(
-            f"n_tilings={n_tilings} tilings of Π(tiles_per_dim + 1) tiles over {n_dims} dimensions are {dense_size:.3g} "
-            f"dense features, more than {MAX_DENSE_FEATURES:,} (a float32 row of them would take "
-            f"{dense_size * 4 / 2**30:.3g} GiB, as would each action's weights): pass hash_size (e.g. 4096, as the "
-            "book's IHT for Mountain Car) to hash the tiles to that many features, or fewer tiles_per_dim"
+            f"n_tilings={n_tilings} tilings of Π(tiles_per_dim + 1) tiles over {n_dims} dimensions are "
+            f"{_approximately(dense_size)} dense features, more than {MAX_DENSE_FEATURES:,} (a float32 row of them "
+            f"would take {_approximately(dense_size * 4 // 2**30)} GiB, as would each action's weights): pass hash_size "
+            "(e.g. 4096, as the book's IHT for Mountain Car) to hash the tiles to that many features, or fewer tiles_per_dim"
         )
     if hash_size is None and dense_size > SLOW_DENSE_FEATURES:
         warnings.warn(
@@ -147,6 +150,18 @@ def _check_grid(
             stacklevel=4,
         )
     return tuple(int(n) for n in tiles), lows, highs
+
+
+def _approximately(count: int) -> str:
+    """:return: ``count`` to 3 significant digits (``f"{count:.3g}"`` overflows past 1e308: 400 dimensions of 9 tiles)"""
+    digits = len(str(count))
+    return f"{count:.3g}" if digits < 300 else f"{int(str(count)[:3]) / 100:.2f}e+{digits - 1}"
+
+
+def _shown(bound: np.ndarray) -> str:
+    """:return: a space's bound for an error, its first values only if it has many"""
+    values = bound.ravel().tolist()
+    return str(values) if len(values) <= 8 else f"[{', '.join(map(str, values[:8]))}, ...] ({len(values)} values)"
 
 
 def _nan_message(x: np.ndarray) -> str:
@@ -351,14 +366,15 @@ class TileCoding(BaseFeaturesExtractor):
     :param tiles_per_dim: tiles across [low, high] in each dimension: one int for all, or one per dimension (8: the
         book's 8 × 8 grid for Mountain Car)
     :param low: lower end of the range of each dimension (one number for all, or one per dimension); the space's
-        ``low`` if None
+        ``low`` if None (which must then be bounded)
     :param high: upper end of the range of each dimension; the space's ``high`` if None
     :param hash_size: None for the exact dense features, or the number of features to hash the tiles to
         (``hash_tiles``: a fixed hash, not an index-hash table)
     :param origin: ``"low"`` (tiling 0's tile boundaries at ``low``, the default) or ``"zero"`` (at 0, as ``tiles3`` on
         tiles_per_dim·x/(high − low); then a tiling can meet tiles_per_dim + 2 tiles along a dimension)
     :raises TypeError: if the observation space is not a Box
-    :raises ValueError: if the range is infinite and not given, or another argument is out of its domain
+    :raises ValueError: if the range is not given and the space's is unbounded (infinite, or at ±1e30 or beyond, such as
+        the float32 limit some envs give for "no bound"), or another argument is out of its domain
     """
 
     tiles_per_dim: tuple[int, ...]
@@ -382,10 +398,18 @@ class TileCoding(BaseFeaturesExtractor):
             )
         n_dims = int(np.prod(observation_space.shape))
         for name, given, bound in (("low", low, observation_space.low), ("high", high, observation_space.high)):
-            if given is None and not np.all(np.isfinite(bound)):
+            if given is None and not np.all(np.abs(bound.astype(np.float64)) < UNBOUNDED):
+                what = (
+                    "infinite"
+                    if not np.all(np.isfinite(bound))
+                    # ±3.4e38, the float32 limit: envs' "unbounded" (CartPole's velocities before Gymnasium 1.0); tiles
+                    # that wide put every observation in one
+                    else f"at ±{np.abs(bound).max():.3g}, envs' way of saying unbounded (every observation would fall in "
+                    "one tile)"
+                )
                 raise ValueError(
-                    f"{name}=None takes the observation space's bounds, but they are infinite ({bound.tolist()}): pass "
-                    f"a finite {name} (one number, or one per dimension), the range the observations actually take"
+                    f"{name}=None takes the observation space's bounds, but they are {what} ({_shown(bound)}): pass a "
+                    f"finite {name} (one number, or one per dimension), the range the observations actually take"
                 )
         low = observation_space.low.ravel().tolist() if low is None else low
         high = observation_space.high.ravel().tolist() if high is None else high

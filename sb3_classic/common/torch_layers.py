@@ -11,6 +11,7 @@ from typing import Any, Literal
 
 import numpy as np
 import torch as th
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
 from sb3_classic.common.utils import check_choice
@@ -150,13 +151,32 @@ def check_constant_init_is_linear(
         for layer in module.modules()
         if isinstance(layer, (nn.Linear, nn.Conv2d)) and id(layer) not in output_ids
     ]
-    if hidden:
-        raise ValueError(
-            f"weight_init={weight_init!r} sets every weight to one number, which is for a linear model (net_arch=[] "
-            f"over features such as TileCoding's, the book's linear methods): this network has {len(hidden)} hidden "
-            "layer(s), whose units would all start and stay identical, so it could not learn. Pass net_arch=[] for "
-            "a linear model, or weight_init='kaiming', 'orthogonal' or 'default' for this network"
+    if not hidden:
+        return
+    extractors = {
+        type(extractor).__name__: {id(layer) for layer in extractor.modules()}
+        for module in modules
+        for extractor in module.modules()
+        if isinstance(extractor, BaseFeaturesExtractor)
+    }
+    in_extractors = {name: sum(id(layer) in ids for layer in hidden) for name, ids in extractors.items()}
+    in_extractors = {name: count for name, count in in_extractors.items() if count}
+    if in_extractors:
+        # CnnPolicy's NatureCNN, say: net_arch=[] does not remove those layers
+        names = ", ".join(f"{name}'s {count}" for name, count in in_extractors.items())
+        where = (
+            f"{sum(in_extractors.values())} of them are in the features extractor ({names}), which net_arch=[] does "
+            "not remove: for a linear model pass net_arch=[] and a features extractor without weights "
+            "(FlattenExtractor, TileCoding, or fixed features of your own) in policy_kwargs"
         )
+    else:
+        where = "Pass net_arch=[] for a linear model"
+    raise ValueError(
+        f"weight_init={weight_init!r} sets every weight to one number, which is for a linear model (net_arch=[] "
+        f"over features such as TileCoding's, the book's linear methods): this network has {len(hidden)} hidden "
+        f"layer(s) with weights, whose units would all start and stay identical, so it could not learn. {where}, "
+        "or pass weight_init='kaiming', 'orthogonal' or 'default' for this network"
+    )
 
 
 def constant_init(modules: Iterable[nn.Module], value: float) -> None:
