@@ -30,13 +30,16 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.utils import FloatSchedule, LinearSchedule
 from stable_baselines3.common.vec_env import DummyVecEnv
-from stable_baselines3.dqn.policies import DQNPolicy
+from stable_baselines3.dqn.policies import DQNPolicy, QNetwork
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 from test_contract import make_model, parameters_equal
 from test_zoo import run
+from torch import nn
 
 from sb3_classic import REINFORCE, NStepSARSA, TileCoding
 from sb3_classic.common.buffers import all_finite
+from sb3_classic.reinforce.policies import REINFORCEPolicy
+from sb3_classic.sarsa.policies import SARSAPolicy
 
 MODEL_LIST = [REINFORCE, NStepSARSA]
 
@@ -86,6 +89,19 @@ def exploring(model_class: type[BaseAlgorithm], space: spaces.Space, **kwargs: A
     env = ActionRecordingEnv(space)
     extra = dict(exploration_initial_eps=1.0, exploration_final_eps=1.0) if model_class is NStepSARSA else {}
     return make_model(model_class, DummyVecEnv([lambda: Monitor(env)]), seed=0, **extra, **kwargs), env
+
+
+class RecordAttribute(BaseCallback):
+    """Keeps an attribute of the model at every step."""
+
+    def __init__(self, name: str) -> None:
+        super().__init__()
+        self.name = name
+        self.values: list[Any] = []
+
+    def _on_step(self) -> bool:
+        self.values.append(getattr(self.model, self.name))
+        return True
 
 
 class RecordLocal(BaseCallback):
@@ -893,6 +909,78 @@ def test_a_model_loaded_without_reset_into_other_envs_starts_new_episodes(
         loaded.learn(64, reset_num_timesteps=False)
     assert loaded.num_timesteps > model.num_timesteps
     assert loaded._last_obs.shape[0] == 3
+
+
+class NoisyLinear(nn.Linear):
+    """A NoisyNet-like output layer: noisy weights in train mode only (it reads ``self.training``)."""
+
+    def forward(self, x: th.Tensor) -> th.Tensor:
+        weight = self.weight + 0.5 * th.randn_like(self.weight) if self.training else self.weight
+        return nn.functional.linear(x, weight, self.bias)
+
+
+class NoisySARSAPolicy(SARSAPolicy):
+    def make_q_net(self) -> QNetwork:
+        q_net = super().make_q_net()
+        q_net.q_net[-1] = NoisyLinear(q_net.q_net[-1].in_features, q_net.q_net[-1].out_features)
+        return q_net
+
+
+def test_a_layer_of_the_users_is_put_in_eval_mode_for_predict() -> None:
+    # set_training_mode only flipped the policy's and q_net's flags where no dropout or batch norm was found: the
+    # NoisyNet layer stayed in train mode, and predict(deterministic=True) was random (DQN's is not)
+    model = NStepSARSA(NoisySARSAPolicy, "CartPole-v1", seed=0, device="cpu")
+    model.learn(100)
+    obs = np.array([0.01, 0.0, 0.01, 0.0], dtype=np.float32)
+    assert len({int(model.predict(obs, deterministic=True)[0]) for _ in range(30)}) == 1
+    assert not model.policy.q_net.q_net[-1].training
+    model.policy.set_training_mode(True)
+    assert model.policy.q_net.q_net[-1].training
+    # SB3's plain layers keep the shortcut
+    assert not NStepSARSA("MlpPolicy", "CartPole-v1", device="cpu").policy.mode_dependent
+
+
+def test_make_q_net_must_return_a_qnetwork() -> None:
+    class Plain(SARSAPolicy):
+        def make_q_net(self) -> Any:
+            return nn.Sequential(nn.Linear(4, 2))
+
+    # (AttributeError: 'Sequential' object has no attribute 'features_extractor')
+    with pytest.raises(TypeError, match="make_q_net returned a Sequential: Plain needs an SB3 QNetwork"):
+        NStepSARSA(Plain, "CartPole-v1", device="cpu")
+
+
+def test_reinforce_acts_with_a_subclass_forward() -> None:
+    # A2C's rollouts act with policy(obs)'s actions; REINFORCE drew from the distribution, ignoring the override
+    class AlwaysOne(REINFORCEPolicy):
+        def forward(self, obs: th.Tensor, deterministic: bool = False) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
+            actions, values, log_prob = super().forward(obs, deterministic)
+            return th.ones_like(actions), values, log_prob
+
+    actions = RecordLocal("actions")
+    REINFORCE(AlwaysOne, "CartPole-v1", seed=0, device="cpu").learn(300, callback=actions)
+    assert set(np.concatenate(actions.values).tolist()) == {1}
+
+
+def test_an_exploration_schedule_of_the_users(tmp_path: Path) -> None:
+    # SB3's DQN keeps its ε schedule as model.exploration_schedule: assigning one was ignored (ε went on decaying), and
+    # the saved file then failed to load ("exploration_schedule=LinearSchedule(...) must be one of ...")
+    model = NStepSARSA("MlpPolicy", "CartPole-v1", seed=0, device="cpu")
+    model.exploration_schedule = LinearSchedule(0.3, 0.3, 1.0)
+    model.learn(300)
+    assert model.exploration_rate == pytest.approx(0.3)
+    model.save(tmp_path / "model.zip")
+    assert NStepSARSA.load(tmp_path / "model.zip", device="cpu").exploration_rate == pytest.approx(0.3)
+    # ... or passed: ε follows the progress of each learn() call, as DQN's
+    decaying = NStepSARSA("MlpPolicy", "CartPole-v1", exploration_schedule=LinearSchedule(1.0, 0.0, 1.0), device="cpu")
+    rates = RecordAttribute("exploration_rate")
+    decaying.learn(400, callback=rates)
+    assert rates.values[0] > 0.9
+    assert rates.values[-1] < 0.1
+    with pytest.raises(ValueError, match=r"exploration_fraction=0.2 belongs to the 'linear' or 'exponential' ε schedule"):
+        NStepSARSA("MlpPolicy", "CartPole-v1", exploration_schedule=FloatSchedule(0.1), exploration_fraction=0.2)
+    with pytest.raises(ValueError, match=r"gave ε = 2\.0 at progress remaining 1: ε is a probability"):
+        NStepSARSA("MlpPolicy", "CartPole-v1", exploration_schedule=FloatSchedule(2.0), device="cpu")
 
 
 @pytest.mark.parametrize("model_class", MODEL_LIST)

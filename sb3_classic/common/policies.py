@@ -11,14 +11,45 @@ policies do not (they assume ``start=0``), hence this module.
 import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.torch_layers import CombinedExtractor, FlattenExtractor, NatureCNN
+from stable_baselines3.dqn.policies import QNetwork
 from torch import nn
 
-#: Modules whose forward pass differs between train and eval mode (``nn.Module.train``)
-MODE_DEPENDENT_MODULES = (
-    nn.modules.dropout._DropoutNd,
-    nn.modules.batchnorm._BatchNorm,
-    nn.modules.instancenorm._InstanceNorm,
+from sb3_classic.common.tile_coding import TileCoding
+
+#: Modules whose forward pass is the same in train and eval mode (``nn.Module.train``), by exact class: a subclass (a
+#: NoisyNet layer subclassing ``nn.Linear``, say) may read ``self.training``. With torch's activations (but
+#: ``nn.MultiheadAttention``, which has dropout), what SB3's and this package's networks are built of
+MODE_INDEPENDENT_MODULES = (
+    nn.Linear,
+    nn.Conv2d,
+    nn.LayerNorm,
+    nn.Flatten,
+    nn.Identity,
+    nn.Sequential,
+    nn.ModuleList,
+    nn.ModuleDict,
+    QNetwork,
+    FlattenExtractor,
+    NatureCNN,
+    CombinedExtractor,
+    TileCoding,
 )
+
+
+def mode_dependent(module: nn.Module) -> bool:
+    """
+    :param module: a network
+    :return: whether its forward pass may differ between train and eval mode: some module in it is not one of
+        ``MODE_INDEPENDENT_MODULES`` or torch's activations (dropout, batch norm, a user's layer or features extractor,
+        which may read ``self.training``)
+    """
+    for submodule in module.modules():
+        kind = type(submodule)
+        activation = kind.__module__ == "torch.nn.modules.activation" and kind is not nn.MultiheadAttention
+        if kind not in MODE_INDEPENDENT_MODULES and not activation:
+            return True
+    return False
 
 
 def action_offset(action_space: spaces.Space) -> np.ndarray | None:

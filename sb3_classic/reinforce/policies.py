@@ -115,6 +115,8 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         #: ``sample_actions`` may then draw from without building it
         hooks = ("get_distribution", "_get_action_dist_from_latent", "extract_features")
         self._sb3_distribution = all(getattr(type(self), hook) is getattr(REINFORCEPolicy, hook) for hook in hooks)
+        #: Whether a subclass overrides ``forward``, whose actions SB3's A2C and PPO act with in their rollouts
+        self._own_forward = type(self).forward is not REINFORCEPolicy.forward
         self.activation_fn = activation_fn
         self.activation_kwargs = activation_kwargs
         self.weight_init = weight_init
@@ -202,7 +204,8 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
 
     def sample_actions(self, obs: PyTorchObs) -> th.Tensor:
         """
-        A ~ π(·|obs, θ), the behaviour policy of the rollout loop: a draw from ``get_distribution(obs)``. For Discrete
+        A ~ π(·|obs, θ), the behaviour policy of the rollout loop: the actions of ``forward(obs)`` where a subclass
+        overrides it (as SB3's A2C acts with them), else a draw from ``get_distribution(obs)``. For Discrete
         actions, where a subclass overrides none of SB3's hooks of that distribution, this is the draw
         ``CategoricalDistribution.sample()`` makes (the same ``multinomial`` call on the soft-max of the logits),
         without building a ``torch.distributions`` object at every env step, which is most of the per-step cost
@@ -211,6 +214,9 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         :param obs: the observations of all envs
         :return: one action per env
         """
+        if self._own_forward:
+            # A subclass's forward (A2C's rollouts take its actions; its values and log-probabilities are not needed)
+            return self(obs)[0]
         if not (isinstance(self.action_dist, CategoricalDistribution) and self._sb3_distribution):
             return self.get_distribution(obs).get_actions()
         features = BaseModel.extract_features(self, obs, self.pi_features_extractor)

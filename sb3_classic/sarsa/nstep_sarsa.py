@@ -132,7 +132,11 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         uses λ-returns); each update then computes q̂ of every stored step once more
     :param exploration_schedule: ``"exponential"``: ε ← max(ε_final, ε · ``exploration_decay_rate``) at the end of
         every episode (the seed report's); ``"linear"``: from initial to final over ``exploration_fraction`` of
-        each ``learn()`` call (SB3's DQN)
+        each ``learn()`` call (SB3's DQN); or a schedule: a callable of the progress remaining (1 at the start of each
+        ``learn()`` call, 0 at its end) returning ε in [0, 1], such as SB3's ``LinearSchedule`` or
+        ``ConstantSchedule`` (SB3's DQN keeps its schedule under this name: one assigned to ``model.exploration_schedule``
+        later applies from the next update, as there); ``exploration_fraction`` and ``exploration_decay_rate`` then
+        do not apply
     :param exploration_initial_eps: initial ε
     :param exploration_final_eps: final ε (the floor of the exponential decay)
     :param exploration_fraction: fraction of training over which the linear decay runs (``"linear"`` only; None:
@@ -178,7 +182,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     }
     policy: SARSAPolicy
     action_space: spaces.Discrete
-    exploration_schedule_fn: ExponentialDecay | LinearSchedule
+    exploration_schedule_fn: ExponentialDecay | Schedule
 
     def __init__(
         self,
@@ -192,7 +196,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         gamma: float = 0.99,
         expected_sarsa: bool = False,
         td_lambda: float = 1.0,
-        exploration_schedule: str = "exponential",
+        exploration_schedule: str | Schedule = "exponential",
         exploration_initial_eps: float = 1.0,
         exploration_final_eps: float = 0.05,
         exploration_fraction: float | None = None,
@@ -281,7 +285,23 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             hint="A count per update; SB3's DQN's -1 (as many as the env steps of the rollout) would be train_freq here",
         )
         check_choice("update_mode", self.update_mode, ("batch", "per_step"))
-        check_choice("exploration_schedule", self.exploration_schedule, ("exponential", "linear"))
+        if callable(self.exploration_schedule):
+            for name, value, unused in (
+                ("exploration_fraction", self.exploration_fraction, None),
+                ("exploration_decay_rate", self.exploration_decay_rate, DEFAULT_EXPLORATION_DECAY_RATE),
+            ):
+                if value != unused:
+                    raise ValueError(
+                        f"{name}={value!r} belongs to the 'linear' or 'exponential' ε schedule, but exploration_schedule="
+                        f"{self.exploration_schedule!r} is a schedule of your own, which would ignore it: drop {name}"
+                    )
+        else:
+            check_choice(
+                "exploration_schedule",
+                self.exploration_schedule,
+                ("exponential", "linear"),
+                hint="Or a schedule: a callable of the progress remaining, e.g. stable_baselines3.common.utils.LinearSchedule",
+            )
         check_range("exploration_initial_eps", self.exploration_initial_eps, 0.0, 1.0)
         check_range("exploration_final_eps", self.exploration_final_eps, 0.0, 1.0)
         if self.exploration_fraction is not None:
@@ -337,7 +357,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
 
     def _setup_model(self) -> None:
         super()._setup_model()
-        if self.exploration_schedule == "exponential":
+        if callable(self.exploration_schedule):
+            self.exploration_schedule_fn = self.exploration_schedule
+        elif self.exploration_schedule == "exponential":
             self.exploration_schedule_fn = ExponentialDecay(
                 self.exploration_initial_eps, self.exploration_final_eps, self.exploration_decay_rate
             )
@@ -396,7 +418,16 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         )
 
     def _update_exploration_rate(self) -> None:
-        if isinstance(self.exploration_schedule_fn, ExponentialDecay):
+        if callable(self.exploration_schedule):
+            # A schedule of the user's, read here so that one assigned after construction applies (SB3's DQN's idiom)
+            epsilon = self.exploration_schedule(self._current_progress_remaining)
+            if not 0.0 <= epsilon <= 1.0:
+                raise ValueError(
+                    f"exploration_schedule={self.exploration_schedule!r} gave ε = {epsilon!r} at progress remaining "
+                    f"{self._current_progress_remaining:.3g}: ε is a probability, in [0, 1]"
+                )
+            self.exploration_rate = float(epsilon)
+        elif isinstance(self.exploration_schedule_fn, ExponentialDecay):
             self.exploration_rate = self.exploration_schedule_fn(self._completed_episodes)
         else:
             self.exploration_rate = self.exploration_schedule_fn(self._current_progress_remaining)

@@ -18,7 +18,7 @@ from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from stable_baselines3.dqn.policies import QNetwork
 from torch import nn
 
-from sb3_classic.common.policies import MODE_DEPENDENT_MODULES, EnvActionsMixin
+from sb3_classic.common.policies import EnvActionsMixin, mode_dependent
 from sb3_classic.common.returns import greedy_random_ties
 from sb3_classic.common.torch_layers import (
     check_constant_init_is_linear,
@@ -122,6 +122,13 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         self.averaged_network = averaged_network
 
         self.q_net = self.make_q_net()
+        if not isinstance(self.q_net, QNetwork):
+            # (AttributeError: '...' object has no attribute 'features_extractor' below)
+            raise TypeError(
+                f"make_q_net returned a {type(self.q_net).__name__}: {type(self).__name__} needs an SB3 QNetwork (its "
+                "features_extractor and q_net Sequential are initialised, copied and read here). Return "
+                "QNetwork(...) or a subclass of it with its own forward (or its own layers in q_net)"
+            )
         features_extractor = self.q_net.features_extractor
         layers = list(self.q_net.q_net)
         # (a features extractor of the user's keeps the initialisation it was built with)
@@ -136,9 +143,9 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             for module in hidden:
                 module.apply(lambda layer: self.init_weights(layer, gain=np.sqrt(2)))
             output.apply(lambda layer: self.init_weights(layer, gain=1.0))
-        #: Whether any module's forward depends on train/eval mode (see set_training_mode): BatchNorm's running
-        #: statistics among them
-        self.mode_dependent = any(isinstance(module, MODE_DEPENDENT_MODULES) for module in self.q_net.modules())
+        #: Whether q̂'s forward may depend on train/eval mode (``common.policies.mode_dependent``; see
+        #: set_training_mode): BatchNorm's running statistics among them
+        self.mode_dependent = mode_dependent(self.q_net)
         #: Whether a subclass overrides ``_predict`` (its greedy policy, e.g. action masking): the ε-greedy behaviour
         #: policy is then ε-greedy in it, as SB3's DQN's is
         self.own_predict = type(self)._predict is not SARSAPolicy._predict
@@ -189,8 +196,9 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
 
     def make_q_net(self) -> QNetwork:
         """
-        Build q̂ (SB3 DQN's hook of the same name: a subclass may override it to build another network; the
-        initialisation, the optimizer and the bootstrap copy and the average are made from what it returns).
+        Build q̂ (SB3 DQN's hook of the same name: a subclass may override it to build another network, an SB3
+        ``QNetwork`` or a subclass of it, with its own ``forward`` or layers; the initialisation, the optimizer and the
+        bootstrap copy and the average are made from what it returns).
 
         :return: the Q-network: a features extractor, then ``net_arch`` hidden layers and one output per action
         """
@@ -263,9 +271,10 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         if self.training == mode and self.q_net.training == mode:
             return
         if not self.mode_dependent:
-            # No module behaves differently in the two modes (no dropout, no batch norm): only the flags change, which
-            # saves the per-step loop a walk over every submodule twice per env step. They are plain attributes, set
-            # past nn.Module.__setattr__ (its checks for parameters and submodules cost more than the assignment)
+            # No module behaves differently in the two modes (every one is of SB3's or torch's plain layers, none a
+            # subclass that could read self.training): only the flags change, which saves the per-step loop a walk
+            # over every submodule twice per env step. They are plain attributes, set past nn.Module.__setattr__
+            # (its checks for parameters and submodules cost more than the assignment)
             self.__dict__["training"] = self.q_net.__dict__["training"] = mode
             return
         self.q_net.set_training_mode(mode)
