@@ -219,6 +219,21 @@ def test_code_versions() -> None:
     assert code_versions("a2c").items() <= code_versions("reinforce").items()
 
 
+def test_a_run_is_not_trained_with_other_code_than_the_commands(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The package's sources edited while a study ran: every run trained, and store_run then refused each result
+    # ("trained on <host> with other versions than this process's"), hours lost
+    trained: list[RunSpec] = []
+    monkeypatch.setattr(runner, "execute_run", lambda spec, queue: trained.append(spec))
+    started = {**code_versions("reinforce"), "sb3_classic": "0.1.0+000000000000"}
+    with pytest.raises(
+        ValueError, match=r"was not trained: the installed code changed since this command started \(sb3_classic"
+    ):
+        runner.run_in_worker(SPEC, started)
+    assert trained == []
+    runner.run_in_worker(SPEC, code_versions("reinforce"))
+    assert trained == [SPEC]
+
+
 def test_parse_budgets() -> None:
     envs = ["CartPole-v1", "Acrobot-v1"]
     defaults = {"CartPole-v1": 5, "Acrobot-v1": 6}

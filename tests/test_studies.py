@@ -83,10 +83,10 @@ def test_a_study_file_loads_into_runs(tmp_path: Path) -> None:
 
 def test_policy_kwargs_string() -> None:
     kwargs = {"net_arch": [256], "activation_fn": "nn.LeakyReLU", "activation_kwargs": {"negative_slope": 0.1}}
-    assert (
-        policy_kwargs_string(kwargs)
-        == "dict(net_arch=[256], activation_fn=nn.LeakyReLU, activation_kwargs=dict(negative_slope=0.1))"
-    )
+    expected = "dict(activation_fn=nn.LeakyReLU, activation_kwargs=dict(negative_slope=0.1), net_arch=[256])"
+    assert policy_kwargs_string(kwargs) == expected
+    # A mapping's order means nothing, and the string is in each run's cache key: reordered, the keys all changed
+    assert policy_kwargs_string(dict(reversed(kwargs.items()))) == expected
 
 
 def test_tile_coding_is_a_name_in_the_mapping_form(tmp_path: Path) -> None:
@@ -179,6 +179,13 @@ def test_readings_reinterpret_only_the_settings_a_variant_has(tmp_path: Path) ->
         # Variants named by numbers are strings to the loader; YAML reads a claim's 3 as an int
         (("n1: {n_steps: 1}", "'1': {n_steps: 1}"), ["claim.others: 'n1' is not a variant"]),
         (("others: [n1]", "others: [1]"), ["claim.others: 1 is not a variant"]),
+        # Levels CartPole-v1 cannot give (returns 1 to 500): "not supported" or "supported" after the runs
+        (
+            ("threshold_window: 3", "threshold_window: 3\nthreshold: 600"),
+            ["threshold: 600: CartPole-v1's returns lie in [1, 500]", "no seed can reach it"],
+        ),
+        (("threshold_window: 3", "threshold_window: 3\nthreshold: -10"), ["every seed reaches it in its first episodes"]),
+        (("kind: better", "kind: reaches, value: 1000"), ["claim.value: 1000: CartPole-v1's returns lie in [1, 500]"]),
     ],
 )
 def test_study_file_errors_name_the_field_and_the_fix(tmp_path: Path, change: tuple[str, str], expected: list[str]) -> None:
@@ -727,6 +734,10 @@ def test_a_budget_in_steps_shows_each_variants_fewest_and_most_episodes(tmp_path
     assert "| `n3` | 2 | 6 |" in page
     assert "The table's Episodes are the fewest and the most a seed of the variant completed" in page
     assert "count as the episodes they completed, a lower bound" in page
+    assert "A run stops at the end of the update that reaches the budget" in page
+    # 6 episodes: the short-run notes the episode budgets get
+    assert "**6 episodes** for the seed with the fewest: the mean over the last 100" in page
+    assert "**6 episodes**, fewer than the threshold's window of 3" not in page
     # A budget in episodes: one number, and the budget
     (tmp_path / "episodes").mkdir()
     study_file, cache, results = fake_cache(tmp_path / "episodes")

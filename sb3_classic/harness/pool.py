@@ -26,7 +26,7 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
-from sb3_classic.harness.common import RunSpec
+from sb3_classic.harness.common import RunSpec, code_versions
 from sb3_classic.harness.runner import ClusterError, RunError, RunResult, init_worker, run_in_worker, store_failure, store_run
 
 
@@ -65,7 +65,9 @@ class PoolRuns:
 
     def submit(self, spec: RunSpec) -> "Future[RunResult]":
         """:return: the future of ``spec``'s ``RunResult``"""
-        return self.pool.submit(run_in_worker, spec)
+        # The versions now, the command's (cached from its start): a worker started after an edit of the package's
+        # sources refuses the run before training it, instead of store_run refusing its result after
+        return self.pool.submit(run_in_worker, spec, code_versions(spec.algo))
 
     def cancel(self) -> None:
         """Cancel the runs not started, and stop those running (the finished ones are cached already)."""

@@ -341,8 +341,28 @@ def _exit_on_sigterm(signum: int, frame: Any) -> None:
     os._exit(128 + signum)
 
 
-def run_in_worker(spec: RunSpec) -> RunResult:
-    """``execute_run`` in a pool process, reporting progress to the queue of ``init_worker``."""
+def run_in_worker(spec: RunSpec, expected: dict[str, str] | None = None) -> RunResult:
+    """
+    ``execute_run`` in a pool process, reporting progress to the queue of ``init_worker``.
+
+    :param spec: the run
+    :param expected: the command's ``code_versions`` when it started, if they are to be checked first
+    :return: the run's summary and files
+    :raise ValueError: if this process's versions differ from ``expected`` (the package's sources were edited since
+        the command started: its result would have been refused by ``store_run`` after training)
+    """
+    found = code_versions(spec.algo)
+    if expected is not None and found != expected:
+        differences = ", ".join(
+            f"{name} {found.get(name, 'missing')} now, {version} when the command started"
+            for name, version in expected.items()
+            if found.get(name) != version
+        )
+        raise ValueError(
+            f"{spec.name} was not trained: the installed code changed since this command started ({differences}: its "
+            "sources were edited, or another version installed), and a result of other code than the command's is not "
+            "cached. Run the command again once the code is settled: the finished runs are cached"
+        )
     return execute_run(spec, _worker_queue)
 
 

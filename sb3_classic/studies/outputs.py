@@ -276,7 +276,7 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         "- Intervals: 95% bootstrap over seeds (`scipy.stats.bootstrap`, BCa); verdicts by the rule of "
         "[STUDIES.md](STUDIES.md).",
         *_short_budget_notes(study),
-        *_step_budget_notes(study),
+        *_step_budget_notes(results),
         *_empty_run_notes(results),
         f"- Versions: {', '.join(f'{name} {version}' for name, version in code_versions(study.algo).items())}.",
         "",
@@ -465,15 +465,33 @@ def _short_budget_notes(study: StudySpec) -> list[str]:
     return notes
 
 
-def _step_budget_notes(study: StudySpec) -> list[str]:
+def _step_budget_notes(results: StudyResults) -> list[str]:
     """:return: what a budget in env steps makes of the table's episodes, the metrics and the figure"""
+    study = results.study
     if study.budget.episodes is not None:
         return []
-    return [
+    notes = [
         "- **A budget in env steps**: seeds complete different numbers of episodes. The table's Episodes are the "
         "fewest and the most a seed of the variant completed; each seed's metrics are over all of its own episodes; "
-        "the figure's curves are over the first episodes, as many as every seed of the variant completed."
+        "the figure's curves are over the first episodes, as many as every seed of the variant completed. A run stops "
+        "at the end of the update that reaches the budget (SARSA's rollouts take `train_freq` steps of every env, "
+        "REINFORCE's update waits for its episodes to end), so it may take a few more steps, and the episodes it "
+        "completes are all counted."
     ]
+    counts = [count for seeds in results.episode_counts.values() for count in seeds]
+    fewest = min(counts, default=0)
+    if 0 < fewest <= stats.LAST_EPISODES:
+        notes.append(
+            f"- **{fewest} episodes** for the seed with the fewest: the mean over the last {stats.LAST_EPISODES} "
+            "episodes of a seed with at most that many is the mean over all of them."
+        )
+    if 0 < fewest < study.threshold_window:
+        notes.append(
+            f"- **{fewest} episodes**, fewer than the threshold's window of {study.threshold_window}, for the seed with "
+            "the fewest: a seed with fewer episodes than the window cannot reach the threshold, and its episodes to "
+            "threshold is its episode count (censored)."
+        )
+    return notes
 
 
 def plural(count: int, one: str, many: str) -> str:

@@ -277,14 +277,15 @@ def policy_kwargs_string(kwargs: Mapping[str, Any]) -> str:
     :param kwargs: ``policy_kwargs`` as a mapping; strings starting with ``nn.`` or ``th.`` are Python names
         (``nn.LeakyReLU``), and so are the names the zoo's YAMLs may use (``TileCoding``: ``features_extractor_class:
         TileCoding``); other strings are strings
-    :return: the zoo's form, ``"dict(net_arch=[64, 64], activation_fn=nn.ReLU)"`` (the zoo evaluates it)
+    :return: the zoo's form, ``"dict(activation_fn=nn.ReLU, net_arch=[64, 64])"`` (the zoo evaluates it), the keys of
+        each mapping sorted: a mapping's order means nothing, and the string is part of each run's cache key
     """
 
     def code(value: Any) -> str:
         if isinstance(value, str) and (value.startswith(("nn.", "th.")) or value in YAML_NAMES):
             return value
         if isinstance(value, Mapping):
-            return "dict(" + ", ".join(f"{key}={code(item)}" for key, item in value.items()) + ")"
+            return "dict(" + ", ".join(f"{key}={code(value[key])}" for key in sorted(value, key=str)) + ")"
         if isinstance(value, list | tuple):
             return "[" + ", ".join(code(item) for item in value) + "]"
         return repr(value)
@@ -428,6 +429,7 @@ def load_study(path: Path | str) -> StudySpec:
                     "episodes_to_threshold needs a budget in episodes (with one in env steps, each seed has its own "
                     "episode count to censor at): write budget: {episodes: ...}, or claim on a return metric",
                 )
+    _check_return_levels(check, data, env_id, env_spec, hyperparams, float(threshold), claims)
     window = check.positive_int("threshold_window", data.get("threshold_window", 100))
     smooth = check.positive_int("smooth", data.get("smooth", 10))
     name = data.get("study", path.stem)
@@ -643,6 +645,46 @@ def _check_readings(
                         f"makes variants {first!r} and {second!r} the same run (it sets what tells them apart): a "
                         "reading must leave the varied settings alone",
                     )
+
+
+#: Envs whose reward of every step lies in [low, high] (Gymnasium's docs): an episode's return then lies in
+#: [min(low, T·low), max(high, T·high)] with T its time limit (an episode has 1 to T steps)
+STEP_REWARDS = {"CartPole-v1": (1.0, 1.0), "Acrobot-v1": (-1.0, 0.0), "MountainCar-v0": (-1.0, -1.0)}
+
+
+def _check_return_levels(
+    check: _Checker,
+    data: Mapping[str, Any],
+    env_id: str,
+    env_spec: Any,
+    hyperparams: Mapping[str, Any],
+    threshold: float,
+    claims: Sequence[Claim],
+) -> None:
+    """
+    A threshold or a claim's level outside the returns the env can give (CartPole-v1: 1 to 500) is refused before any
+    run: no seed could ever reach it, or every seed would at its first episodes. Only for the envs of
+    ``STEP_REWARDS`` with their registered time limit (not with an ``env_wrapper`` or ``env_kwargs``, which may change it).
+    """
+    limit = env_spec.max_episode_steps if env_spec is not None else None
+    if env_id not in STEP_REWARDS or limit is None or {"env_wrapper", "env_kwargs"} & set(hyperparams):
+        return
+    low, high = STEP_REWARDS[env_id]
+    lowest, highest = min(low, limit * low), max(high, limit * high)
+    per_step = f"a reward in [{low:g}, {high:g}] per step, 1 to {limit} steps"
+    what = f"{env_id}'s returns lie in [{lowest:g}, {highest:g}] ({per_step})"
+    if "threshold" in data and not lowest <= threshold <= highest:
+        effect = "no seed can reach it" if threshold > highest else "every seed reaches it in its first episodes"
+        check.fail("threshold", f"{threshold:g}: {what}, so {effect}: give a level within them")
+    for index, claim in enumerate(claims):
+        # (a level of the spread over seeds, statistic: std, is not a return)
+        if claim.value is None or claim.metric == "episodes_to_threshold" or claim.statistic == "std":
+            continue
+        if "threshold" in data and claim.value == threshold:  # (the threshold's own message says it)
+            continue
+        if not lowest <= claim.value <= highest:
+            where = f"claims[{index}].value" if "claims" in data else "claim.value"
+            check.fail(where, f"{claim.value:g}: {what}, so its verdict is known before any run: give a level within them")
 
 
 def _claims(check: _Checker, data: Mapping[str, Any], variants: Mapping[str, Any], threshold: float) -> tuple[Claim, ...]:
