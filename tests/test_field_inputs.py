@@ -91,19 +91,6 @@ def exploring(model_class: type[BaseAlgorithm], space: spaces.Space, **kwargs: A
     return make_model(model_class, DummyVecEnv([lambda: Monitor(env)]), seed=0, **extra, **kwargs), env
 
 
-class RecordAttribute(BaseCallback):
-    """Keeps an attribute of the model at every step."""
-
-    def __init__(self, name: str) -> None:
-        super().__init__()
-        self.name = name
-        self.values: list[Any] = []
-
-    def _on_step(self) -> bool:
-        self.values.append(getattr(self.model, self.name))
-        return True
-
-
 class RecordLocal(BaseCallback):
     """Keeps a variable of the rollout loop at every step (``self.locals[name]``)."""
 
@@ -114,6 +101,14 @@ class RecordLocal(BaseCallback):
 
     def _on_step(self) -> bool:
         self.values.append(np.copy(self.locals[self.name]))
+        return True
+
+
+class RecordAttribute(RecordLocal):
+    """Keeps an attribute of the model at every step."""
+
+    def _on_step(self) -> bool:
+        self.values.append(getattr(self.model, self.name))
         return True
 
 

@@ -266,6 +266,15 @@ def execute_run(spec: RunSpec, queue: ProgressQueue | None = None, host: str | N
     return RunResult(summary=summary, files=files, host=host)
 
 
+def _version_differences(reference: dict[str, str], reference_label: str, other: dict[str, str], other_label: str) -> str:
+    """:return: ``"name <other's> <other_label>, <reference's> <reference_label>"`` for each version that differs"""
+    return ", ".join(
+        f"{name} {other.get(name, 'missing')} {other_label}, {version} {reference_label}"
+        for name, version in reference.items()
+        if other.get(name) != version
+    )
+
+
 def store_run(spec: RunSpec, cache_dir: Path, result: RunResult) -> dict[str, Any]:
     """
     Write a finished run into the cache. The folder is built in ``<run dir>.partial`` and renamed when complete:
@@ -278,13 +287,7 @@ def store_run(spec: RunSpec, cache_dir: Path, result: RunResult) -> dict[str, An
     :raise ValueError: if the run was trained with other code versions than this process's (its cache key differs)
     """
     if result.summary["key"] != spec.key():
-        ours = code_versions(spec.algo)
-        theirs = result.summary["versions"]
-        differences = ", ".join(
-            f"{name} {theirs.get(name, 'missing')} there, {version} here"
-            for name, version in ours.items()
-            if theirs.get(name) != version
-        )
+        differences = _version_differences(code_versions(spec.algo), "here", result.summary["versions"], "there")
         raise ValueError(
             f"{spec.name} was trained on {result.host} with other versions than this process's "
             f"({differences or 'its cache key differs'}): install the same versions there, or run it here"
@@ -353,11 +356,7 @@ def run_in_worker(spec: RunSpec, expected: dict[str, str] | None = None) -> RunR
     """
     found = code_versions(spec.algo)
     if expected is not None and found != expected:
-        differences = ", ".join(
-            f"{name} {found.get(name, 'missing')} now, {version} when the command started"
-            for name, version in expected.items()
-            if found.get(name) != version
-        )
+        differences = _version_differences(expected, "when the command started", found, "now")
         raise ValueError(
             f"{spec.name} was not trained: the installed code changed since this command started ({differences}: its "
             "sources were edited, or another version installed), and a result of other code than the command's is not "
