@@ -186,6 +186,8 @@ def test_readings_reinterpret_only_the_settings_a_variant_has(tmp_path: Path) ->
         ),
         (("threshold_window: 3", "threshold_window: 3\nthreshold: -10"), ["every seed reaches it in its first episodes"]),
         (("kind: better", "kind: reaches, value: 1000"), ["claim.value: 1000: CartPole-v1's returns lie in [1, 500]"]),
+        # Not a number: its own message only (it said too that "every seed reaches" nan)
+        (("threshold_window: 3", "threshold_window: 3\nthreshold: abc"), ["threshold: 'abc': give the return"]),
     ],
 )
 def test_study_file_errors_name_the_field_and_the_fix(tmp_path: Path, change: tuple[str, str], expected: list[str]) -> None:
@@ -198,6 +200,17 @@ def test_study_file_errors_name_the_field_and_the_fix(tmp_path: Path, change: tu
     assert str(path) in message
     for part in expected:
         assert part in message
+    # One message per problem: a threshold that is not a number was also said to lie outside the env's returns
+    assert sum(line.strip().startswith("threshold:") for line in message.splitlines()) <= 1
+
+
+def test_a_variant_with_its_own_time_limit_may_have_a_threshold_beyond_the_envs(tmp_path: Path) -> None:
+    # The return-range check looked at the base settings only: a variant's TimeLimit of 2,000 steps was refused
+    wrapper = "env_wrapper: [{gymnasium.wrappers.TimeLimit: {max_episode_steps: 2000}}]"
+    text = TINY.replace("n3: {n_steps: 3,", f"n3: {{{wrapper}, n_steps: 3,").replace(
+        "threshold_window: 3", "threshold_window: 3\nthreshold: 1000"
+    )
+    assert load_study(write_study(tmp_path, text)).threshold == 1000
 
 
 def test_a_folder_of_study_files_lists_every_bad_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -327,6 +327,10 @@ BOX = spaces.Box(np.array([-1.0, 0.0], dtype=np.float32), np.array([1.0, 5.0], d
         # Bounds at the float32 limit (envs' "unbounded"): every observation fell in one tile, silently
         (spaces.Box(-3.4e38, 3.4e38, (2,)), {}, r"low=None .* at ±3.4e\+38, envs' way of saying unbounded .* pass a finite"),
         (spaces.Box(-1.0, 1e30, (2,)), dict(low=-1.0), r"high=None .* at ±1e\+30"),
+        # An integer Box without bounds: Gymnasium stores its dtype's limits (±2.1e9), marked unbounded
+        (spaces.Box(-np.inf, np.inf, (2,), np.int32), {}, r"low=None .* they are infinite"),
+        # The row's size in GiB below 1 was "0 GiB" (an integer division)
+        (spaces.Box(0.0, 1.0, (4,)), dict(tiles_per_dim=63), r"1.34e\+08 dense features, .* would take 0.5 GiB"),
     ],
 )
 def test_bad_arguments_raise_naming_them(space: spaces.Space, kwargs: dict, match: str) -> None:

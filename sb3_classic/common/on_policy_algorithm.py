@@ -323,13 +323,22 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
             passed to REINFORCE, or a file saved by another algorithm: ``load()`` takes the saved policy class)
         """
         name = getattr(self.policy_class, "__qualname__", repr(self.policy_class))
+        module = getattr(self.policy_class, "__module__", "")
         aliases = ", ".join(repr(alias) for alias in self.policy_aliases)
         base = self.policy_aliases.get("MlpPolicy")  # the others subclass it
         own = base.__name__ if base is not None else ", ".join(policy.__name__ for policy in self.policy_aliases.values())
+        # The class to load a file with, from its policy's module (stable_baselines3.dqn.policies: DQN)
+        package = module.split(".")
+        if package[0] in ("stable_baselines3", "sb3_contrib") and len(package) > 1 and package[1] != "common":
+            loader = f"{package[0]}.{package[1].upper()}.load"
+        elif module.startswith("stable_baselines3.common"):
+            loader = "stable_baselines3.A2C.load or PPO.load, whichever saved it"
+        else:
+            loader = "REINFORCE.load" if type(self).__name__ == "NStepSARSA" else "NStepSARSA.load"
         return (
-            f"policy={getattr(self.policy_class, '__module__', '')}.{name} is not one of {type(self).__name__}'s "
-            f"policies: pass {aliases}, or a subclass of {own}. If this model was loaded from a file, the file was "
-            "saved by another algorithm; load it with that algorithm's class (e.g. REINFORCE.load or NStepSARSA.load)"
+            f"policy={module}.{name} is not one of {type(self).__name__}'s policies: pass {aliases}, or a subclass of "
+            f"{own}. If this model was loaded from a file, the file was saved by another algorithm; load it with that "
+            f"algorithm's class ({loader})"
         )
 
     def _policy_kwargs_hint(self, error: str) -> str:

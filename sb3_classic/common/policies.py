@@ -19,7 +19,7 @@ from sb3_classic.common.tile_coding import TileCoding
 
 #: Modules whose forward pass is the same in train and eval mode (``nn.Module.train``), by exact class: a subclass (a
 #: NoisyNet layer subclassing ``nn.Linear``, say) may read ``self.training``. With torch's activations (but
-#: ``nn.MultiheadAttention``, which has dropout), what SB3's and this package's networks are built of
+#: ``MODE_DEPENDENT_ACTIVATIONS``), what SB3's and this package's networks are built of
 MODE_INDEPENDENT_MODULES = (
     nn.Linear,
     nn.Conv2d,
@@ -36,6 +36,10 @@ MODE_INDEPENDENT_MODULES = (
     TileCoding,
 )
 
+#: The classes of ``torch.nn.modules.activation`` that compute otherwise in train mode: RReLU draws its slopes at
+#: random, MultiheadAttention has dropout
+MODE_DEPENDENT_ACTIVATIONS = (nn.RReLU, nn.MultiheadAttention)
+
 
 def mode_dependent(module: nn.Module) -> bool:
     """
@@ -46,7 +50,7 @@ def mode_dependent(module: nn.Module) -> bool:
     """
     for submodule in module.modules():
         kind = type(submodule)
-        activation = kind.__module__ == "torch.nn.modules.activation" and kind is not nn.MultiheadAttention
+        activation = kind.__module__ == "torch.nn.modules.activation" and kind not in MODE_DEPENDENT_ACTIVATIONS
         if kind not in MODE_INDEPENDENT_MODULES and not activation:
             return True
     return False

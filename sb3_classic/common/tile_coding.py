@@ -137,7 +137,7 @@ def _check_grid(
         raise ValueError(
             f"n_tilings={n_tilings} tilings of Π(tiles_per_dim + 1) tiles over {n_dims} dimensions are "
             f"{_approximately(dense_size)} dense features, more than {MAX_DENSE_FEATURES:,} (a float32 row of them "
-            f"would take {_approximately(dense_size * 4 // 2**30)} GiB, as would each action's weights): pass hash_size "
+            f"would take {_approximately(dense_size * 4, 2**30)} GiB, as would each action's weights): pass hash_size "
             "(e.g. 4096, as the book's IHT for Mountain Car) to hash the tiles to that many features, or fewer tiles_per_dim"
         )
     if hash_size is None and dense_size > SLOW_DENSE_FEATURES:
@@ -152,10 +152,15 @@ def _check_grid(
     return tuple(int(n) for n in tiles), lows, highs
 
 
-def _approximately(count: int) -> str:
-    """:return: ``count`` to 3 significant digits (``f"{count:.3g}"`` overflows past 1e308: 400 dimensions of 9 tiles)"""
-    digits = len(str(count))
-    return f"{count:.3g}" if digits < 300 else f"{int(str(count)[:3]) / 100:.2f}e+{digits - 1}"
+def _approximately(count: int, unit: int = 1) -> str:
+    """
+    :return: ``count / unit`` to 3 significant digits (``f"{count:.3g}"`` overflows past 1e308: 400 dimensions of 9
+        tiles)
+    """
+    if len(str(count)) < 300:
+        return f"{count / unit:.3g}"
+    digits = len(str(count // unit))
+    return f"{int(str(count // unit)[:3]) / 100:.2f}e+{digits - 1}"
 
 
 def _shown(bound: np.ndarray) -> str:
@@ -398,10 +403,12 @@ class TileCoding(BaseFeaturesExtractor):
             )
         n_dims = int(np.prod(observation_space.shape))
         for name, given, bound in (("low", low, observation_space.low), ("high", high, observation_space.high)):
-            if given is None and not np.all(np.abs(bound.astype(np.float64)) < UNBOUNDED):
+            bounded = observation_space.bounded_below if name == "low" else observation_space.bounded_above
+            if given is None and not (np.all(bounded) and np.all(np.abs(bound.astype(np.float64)) < UNBOUNDED)):
                 what = (
+                    # (an integer Box's ±inf are stored as its dtype's limits, marked unbounded)
                     "infinite"
-                    if not np.all(np.isfinite(bound))
+                    if not (np.all(np.isfinite(bound)) and np.all(bounded))
                     # ±3.4e38, the float32 limit: envs' "unbounded" (CartPole's velocities before Gymnasium 1.0); tiles
                     # that wide put every observation in one
                     else f"at ±{np.abs(bound).max():.3g}, envs' way of saying unbounded (every observation would fall in "

@@ -145,22 +145,30 @@ def check_constant_init_is_linear(
     if isinstance(weight_init, str):
         return
     output_ids = {id(layer) for layer in outputs}
-    hidden = [
-        layer
-        for module in modules
-        for layer in module.modules()
-        if isinstance(layer, (nn.Linear, nn.Conv2d)) and id(layer) not in output_ids
-    ]
+    # Each layer once (a features extractor shared by two networks is one)
+    hidden = list(
+        {
+            id(layer): layer
+            for module in modules
+            for layer in module.modules()
+            if isinstance(layer, (nn.Linear, nn.Conv2d)) and id(layer) not in output_ids
+        }.values()
+    )
     if not hidden:
         return
     extractors = {
-        type(extractor).__name__: {id(layer) for layer in extractor.modules()}
+        id(extractor): extractor
         for module in modules
         for extractor in module.modules()
         if isinstance(extractor, BaseFeaturesExtractor)
     }
-    in_extractors = {name: sum(id(layer) in ids for layer in hidden) for name, ids in extractors.items()}
-    in_extractors = {name: count for name, count in in_extractors.items() if count}
+    in_extractors: dict[str, int] = {}  # per class (REINFORCE's actor and critic have a NatureCNN each)
+    for extractor in extractors.values():
+        ids = {id(layer) for layer in extractor.modules()}
+        count = sum(id(layer) in ids for layer in hidden)
+        if count:
+            name = type(extractor).__name__
+            in_extractors[name] = in_extractors.get(name, 0) + count
     if in_extractors:
         # CnnPolicy's NatureCNN, say: net_arch=[] does not remove those layers
         names = ", ".join(f"{name}'s {count}" for name, count in in_extractors.items())

@@ -50,6 +50,8 @@ def _polyak_update(source: th.nn.Module, copy: th.nn.Module, tau: float, statist
 DEFAULT_EXPLORATION_FRACTION = 0.1
 # The exponential ε schedule's per-episode factor (the constructor's default)
 DEFAULT_EXPLORATION_DECAY_RATE = 0.995
+# The first ε and the last (the linear schedule's) or the floor (the exponential one's): the constructor's defaults
+DEFAULT_EXPLORATION_INITIAL_EPS, DEFAULT_EXPLORATION_FINAL_EPS = 1.0, 0.05
 # Env steps per env between two logger dumps with learn()'s default log_interval ("auto")
 LOG_EVERY_STEPS = 128
 
@@ -135,8 +137,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         each ``learn()`` call (SB3's DQN); or a schedule: a callable of the progress remaining (1 at the start of each
         ``learn()`` call, 0 at its end) returning ε in [0, 1], such as SB3's ``LinearSchedule`` or
         ``ConstantSchedule`` (SB3's DQN keeps its schedule under this name: one assigned to ``model.exploration_schedule``
-        later applies from the next update, as there); ``exploration_fraction`` and ``exploration_decay_rate`` then
-        do not apply
+        later applies from the next update, as there); the other ``exploration_`` arguments are then refused if given
+        (the schedule gives every ε)
     :param exploration_initial_eps: initial ε
     :param exploration_final_eps: final ε (the floor of the exponential decay)
     :param exploration_fraction: fraction of training over which the linear decay runs (``"linear"`` only; None:
@@ -197,8 +199,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         expected_sarsa: bool = False,
         td_lambda: float = 1.0,
         exploration_schedule: str | Schedule = "exponential",
-        exploration_initial_eps: float = 1.0,
-        exploration_final_eps: float = 0.05,
+        exploration_initial_eps: float = DEFAULT_EXPLORATION_INITIAL_EPS,
+        exploration_final_eps: float = DEFAULT_EXPLORATION_FINAL_EPS,
         exploration_fraction: float | None = None,
         exploration_decay_rate: float = DEFAULT_EXPLORATION_DECAY_RATE,
         target_update_interval: int | None = None,
@@ -287,13 +289,16 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         check_choice("update_mode", self.update_mode, ("batch", "per_step"))
         if callable(self.exploration_schedule):
             for name, value, unused in (
+                ("exploration_initial_eps", self.exploration_initial_eps, DEFAULT_EXPLORATION_INITIAL_EPS),
+                ("exploration_final_eps", self.exploration_final_eps, DEFAULT_EXPLORATION_FINAL_EPS),
                 ("exploration_fraction", self.exploration_fraction, None),
                 ("exploration_decay_rate", self.exploration_decay_rate, DEFAULT_EXPLORATION_DECAY_RATE),
             ):
                 if value != unused:
                     raise ValueError(
                         f"{name}={value!r} belongs to the 'linear' or 'exponential' ε schedule, but exploration_schedule="
-                        f"{self.exploration_schedule!r} is a schedule of your own, which would ignore it: drop {name}"
+                        f"{self.exploration_schedule!r} is a schedule of your own, which would ignore it: drop {name} "
+                        "(your schedule gives every ε)"
                     )
         else:
             check_choice(

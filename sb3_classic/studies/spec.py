@@ -429,7 +429,8 @@ def load_study(path: Path | str) -> StudySpec:
                     "episodes_to_threshold needs a budget in episodes (with one in env steps, each seed has its own "
                     "episode count to censor at): write budget: {episodes: ...}, or claim on a return metric",
                 )
-    _check_return_levels(check, data, env_id, env_spec, hyperparams, float(threshold), claims)
+    settings = [hyperparams, *variants.values(), *readings.values()]
+    _check_return_levels(check, data, env_id, env_spec, settings, float(threshold), claims)
     window = check.positive_int("threshold_window", data.get("threshold_window", 100))
     smooth = check.positive_int("smooth", data.get("smooth", 10))
     name = data.get("study", path.stem)
@@ -657,23 +658,26 @@ def _check_return_levels(
     data: Mapping[str, Any],
     env_id: str,
     env_spec: Any,
-    hyperparams: Mapping[str, Any],
+    settings: Sequence[Mapping[str, Any]],
     threshold: float,
     claims: Sequence[Claim],
 ) -> None:
     """
     A threshold or a claim's level outside the returns the env can give (CartPole-v1: 1 to 500) is refused before any
     run: no seed could ever reach it, or every seed would at its first episodes. Only for the envs of
-    ``STEP_REWARDS`` with their registered time limit (not with an ``env_wrapper`` or ``env_kwargs``, which may change it).
+    ``STEP_REWARDS`` with their registered time limit (not where the hyperparameters, a variant's or a reading's, give
+    an ``env_wrapper`` or ``env_kwargs``, which may change it).
     """
     limit = env_spec.max_episode_steps if env_spec is not None else None
-    if env_id not in STEP_REWARDS or limit is None or {"env_wrapper", "env_kwargs"} & set(hyperparams):
+    wrapped = any({"env_wrapper", "env_kwargs"} & set(setting) for setting in settings)
+    if env_id not in STEP_REWARDS or limit is None or wrapped:
         return
     low, high = STEP_REWARDS[env_id]
     lowest, highest = min(low, limit * low), max(high, limit * high)
     per_step = f"a reward in [{low:g}, {high:g}] per step, 1 to {limit} steps"
     what = f"{env_id}'s returns lie in [{lowest:g}, {highest:g}] ({per_step})"
-    if "threshold" in data and not lowest <= threshold <= highest:
+    # (a threshold that is not a number has its own message)
+    if "threshold" in data and math.isfinite(threshold) and not lowest <= threshold <= highest:
         effect = "no seed can reach it" if threshold > highest else "every seed reaches it in its first episodes"
         check.fail("threshold", f"{threshold:g}: {what}, so {effect}: give a level within them")
     for index, claim in enumerate(claims):
