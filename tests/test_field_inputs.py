@@ -917,7 +917,9 @@ class NoisyLinear(nn.Linear):
 class NoisySARSAPolicy(SARSAPolicy):
     def make_q_net(self) -> QNetwork:
         q_net = super().make_q_net()
-        q_net.q_net[-1] = NoisyLinear(q_net.q_net[-1].in_features, q_net.q_net[-1].out_features)
+        output = q_net.q_net[-1]
+        assert isinstance(output, nn.Linear)
+        q_net.q_net[-1] = NoisyLinear(output.in_features, output.out_features)
         return q_net
 
 
@@ -1013,7 +1015,8 @@ def test_a_file_of_the_other_algorithm_is_named_as_such(
     if saved_class in (REINFORCE, NStepSARSA):
         make_model(saved_class).save(tmp_path / "model.zip")
     else:
-        saved_class("MlpPolicy", "CartPole-v1", device="cpu").save(tmp_path / "model.zip")
+        peer: Any = saved_class
+        peer("MlpPolicy", "CartPole-v1", device="cpu").save(tmp_path / "model.zip")
     with pytest.raises(TypeError, match="saved by another algorithm") as error:
         loading_class.load(tmp_path / "model.zip")
     # ... naming the class to load it with (it said "REINFORCE.load or NStepSARSA.load" for SB3's files too)

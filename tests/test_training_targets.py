@@ -224,7 +224,12 @@ def test_reinforce_cuts_an_episode_that_never_ends() -> None:
     # taken for an episode missing from the buffer, as after load(force_reset=False))
     resets: list[int] = []
     reset = model.env.reset  # type: ignore[union-attr]
-    model.env.reset = lambda: resets.append(1) or reset()  # type: ignore[method-assign, union-attr]
+
+    def counted_reset() -> Any:
+        resets.append(1)
+        return reset()
+
+    model.env.reset = counted_reset  # type: ignore[method-assign, union-attr]
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         warnings.filterwarnings("ignore", message=".*max_episode_length")
