@@ -776,7 +776,9 @@ REFUSED_INPUTS = [
     (REINFORCE, dict(ent_coef=math.inf), ValueError, "ent_coef=inf must be a number in [0.0, inf)"),
     # A constant initialisation of hidden layers: every hidden unit stays identical, only the output biases learn
     (REINFORCE, dict(policy_kwargs=dict(weight_init=0.0)), ValueError, "weight_init=0.0 sets every weight to one number"),
-    (NStepSARSA, dict(policy_kwargs=dict(weight_init=0.1)), ValueError, "has 2 hidden layer(s)"),
+    (NStepSARSA, dict(policy_kwargs=dict(weight_init=0.1)), ValueError, "have 2 hidden layer(s) with weights in all"),
+    # The actor's and the critic's: net_arch=[8] was said to have 2 hidden layers, unexplained
+    (REINFORCE, dict(policy_kwargs=dict(net_arch=[8], weight_init=0.0)), ValueError, "counts the actor's and the critic's"),
     # The exponential schedule is max(ε_final, ...): it would run at ε_final from the start
     (NStepSARSA, dict(exploration_initial_eps=0.0), ValueError, "exploration_initial_eps=0.0 is below exploration_final_eps"),
     # Set by the algorithm from its own argument (Python's "got multiple values for keyword argument" before)
@@ -990,7 +992,7 @@ def test_a_constant_init_of_a_cnn_names_its_features_extractor(model_class: type
     env = FakeImageEnv(screen_height=36, screen_width=36, n_channels=1, discrete=True)
     # REINFORCE's actor and critic have a NatureCNN each (the count said 4 of 8, one overwriting the other)
     count = 8 if model_class is REINFORCE else 4
-    expected = rf"has {count} hidden layer\(s\) .* {count} of them are in the features extractor \(NatureCNN's {count}\)"
+    expected = rf"have {count} hidden layer\(s\) .* {count} of them are in the features extractor \(NatureCNN's {count}\)"
     with pytest.raises(ValueError, match=expected):
         model_class("CnnPolicy", env, policy_kwargs=dict(net_arch=[], weight_init=0.0), device="cpu")  # type: ignore[call-arg]
 

@@ -181,8 +181,10 @@ def check_constant_init_is_linear(
         where = "Pass net_arch=[] for a linear model"
     raise ValueError(
         f"weight_init={weight_init!r} sets every weight to one number, which is for a linear model (net_arch=[] "
-        f"over features such as TileCoding's, the book's linear methods): this network has {len(hidden)} hidden "
-        f"layer(s) with weights, whose units would all start and stay identical, so it could not learn. {where}, "
+        f"over features such as TileCoding's, the book's linear methods): the policy's networks have {len(hidden)} "
+        "hidden layer(s) with weights in all (an actor-critic policy's counts the actor's and the critic's), whose units "
+        "would all start and stay identical, so they "
+        f"could not learn. {where}, "
         "or pass weight_init='kaiming', 'orthogonal' or 'default' for this network"
     )
 

@@ -35,8 +35,8 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
       steps, and T changes during training;
     - ``"per_step"``: the book's loop over the episode, t = 0, …, T − 1 (§13.4's box): δ_t from the current w, the
       value update with α^w, then the policy update with α^θ, each with the full step size. With plain SGD
-      (``policy_kwargs=dict(optimizer_class=th.optim.SGD)``), one env and ``n_episodes=1`` it is the book's algorithm
-      to the last bit.
+      (``policy_kwargs=dict(optimizer_class=th.optim.SGD)``), one env, ``n_episodes=1`` and ``gamma_t_factor=True``
+      (the box's γ^t; or γ = 1) it is the book's algorithm to the last bit.
 
     Why batch by default: the settings of ``hyperparams/reinforce.yml`` (Adam, the seed report's learning rates)
     were found and benchmarked with it; the per-step mode makes T optimizer steps per episode instead of one
