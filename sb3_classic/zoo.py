@@ -35,6 +35,7 @@ from sb3_classic.common.tile_coding import TileCoding
 from sb3_classic.common.torch_layers import WEIGHT_INITS
 from sb3_classic.reinforce import REINFORCE
 from sb3_classic.sarsa import NStepSARSA
+from sb3_classic.sarsa.nstep_sarsa import DEFAULT_EXPLORATION_DECAY_RATE
 
 if TYPE_CHECKING:
     import optuna
@@ -129,9 +130,13 @@ def convert_reinforce_params(sampled_params: dict[str, Any]) -> dict[str, Any]:
     (rl-zoo3 calls it to train with a stored trial: ``--storage ... --study-name ... --trial-id N``).
 
     :param sampled_params: the trial's parameters (``trial.params``)
-    :return: keyword arguments of ``REINFORCE``
+    :return: keyword arguments of ``REINFORCE``; with ``normalize_advantage=True``, ``update_mode="batch"`` too
+        (standardising δ needs a batch: a YAML's ``per_step`` would be refused and end the study)
     """
-    return _convert_common(sampled_params)
+    params = _convert_common(sampled_params)
+    if params.get("normalize_advantage"):
+        params["update_mode"] = "batch"
+    return params
 
 
 def sample_reinforce_params(
@@ -140,7 +145,8 @@ def sample_reinforce_params(
     """
     Optuna search space of REINFORCE with baseline (rl-zoo3's ``-optimize``): both learning rates, episodes per
     update, γ, advantage normalisation, entropy bonus, learning-rate step decay, and the networks' depth, width,
-    activation and initialisation.
+    activation and initialisation. A trial that draws advantage normalisation trains in batch mode (its
+    ``update_mode`` user attribute says so), whatever the YAML's ``update_mode``.
 
     :param trial: the Optuna trial to sample from
     :param n_actions: size of a Box action space (unused)
@@ -160,6 +166,8 @@ def sample_reinforce_params(
         **_suggest_network(trial),
     }
     trial.set_user_attr("gamma", 1 - sampled_params["one_minus_gamma"])
+    if sampled_params["normalize_advantage"]:
+        trial.set_user_attr("update_mode", "batch")
     return convert_reinforce_params(sampled_params)
 
 
@@ -169,12 +177,15 @@ def convert_nstep_sarsa_params(sampled_params: dict[str, Any]) -> dict[str, Any]
     (rl-zoo3 calls it to train with a stored trial: ``--storage ... --study-name ... --trial-id N``).
 
     :param sampled_params: the trial's parameters (``trial.params``)
-    :return: keyword arguments of ``NStepSARSA``, without the parameter of the ε schedule not chosen (``NStepSARSA``
-        refuses ``exploration_fraction`` with the exponential schedule)
+    :return: keyword arguments of ``NStepSARSA``, the parameter of the ε schedule not chosen at its neutral value
+        (the default ``exploration_decay_rate``, or ``exploration_fraction=None``): ``NStepSARSA`` refuses the other
+        schedule's parameter, and a YAML's or ``-params``' value of it would otherwise stay and end the study
     """
     params = _convert_common(sampled_params)
-    linear = params.get("exploration_schedule") == "linear"
-    params.pop("exploration_decay_rate" if linear else "exploration_fraction", None)
+    if params.get("exploration_schedule") == "linear":
+        params["exploration_decay_rate"] = DEFAULT_EXPLORATION_DECAY_RATE
+    else:
+        params["exploration_fraction"] = None
     return params
 
 
@@ -218,6 +229,10 @@ def sample_nstep_sarsa_params(
         **_suggest_network(trial),
     }
     trial.set_user_attr("gamma", 1 - sampled_params["one_minus_gamma"])
+    # The zoo reports every sampled parameter: say which one the trial did not train with (report_*.csv's
+    # user_attrs_unused column)
+    unused = "exploration_decay_rate" if sampled_params["exploration_schedule"] == "linear" else "exploration_fraction"
+    trial.set_user_attr("unused", unused)
     return convert_nstep_sarsa_params(sampled_params)
 
 

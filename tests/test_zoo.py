@@ -356,6 +356,14 @@ def test_search_space(algo: str, sampler: Callable[..., optuna.samplers.BaseSamp
         for env_id, entry in yaml.safe_load(hyperparams_path(algo).read_text()).items():
             from_yaml = {key: value for key, value in entry.items() if key not in ZOO_KEYS | {"n_timesteps"}}
             from_yaml["lr_decay_milestones"] = [300, 500]
+            # A YAML's (or -params') value of a setting the sampled ones exclude: each ended the study when drawn
+            # against it (exploration_fraction with 'exponential', a decay rate with 'linear', per-step updates with
+            # normalize_advantage)
+            from_yaml |= (
+                dict(exploration_schedule="linear", exploration_fraction=0.3, exploration_decay_rate=0.99)
+                if algo == "nstep_sarsa"
+                else dict(update_mode="per_step")
+            )
             env = env_id if env_id != "default" and env_id in gym.registry else "CartPole-v1"
             model = ALGORITHMS[algo]("MlpPolicy", env, device="cpu", **{**from_yaml, **hyperparams})
             total += sum(param.numel() for param in model.policy.parameters())
@@ -366,6 +374,11 @@ def test_search_space(algo: str, sampler: Callable[..., optuna.samplers.BaseSamp
     study.optimize(objective, n_trials=8)
     assert all(trial.state == optuna.trial.TrialState.COMPLETE for trial in study.trials)
     assert {frozenset(trial.params) for trial in study.trials} == {frozenset(SEARCH_SPACES[algo])}
+    if algo == "nstep_sarsa":
+        # The zoo reports every sampled parameter: the one a trial did not train with is named
+        for trial in study.trials:
+            linear = trial.params["exploration_schedule"] == "linear"
+            assert trial.user_attrs["unused"] == ("exploration_decay_rate" if linear else "exploration_fraction")
 
 
 # --- The zoo's commands --------------------------------------------------------------------------------------------
