@@ -717,26 +717,27 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         progress_bar: bool = False,
     ) -> tuple[int, BaseCallback]:
         saved_envs = None if self._last_episode_starts is None else len(self._last_episode_starts)
-        if not reset_num_timesteps and self._last_obs is not None and saved_envs not in (None, self.n_envs):
-            # load(..., env=<another number of envs>, force_reset=False): the file's last observations are of other
-            # envs (NumPy's "operands could not be broadcast" otherwise)
-            warnings.warn(
-                f"This model's file holds the last observations of {saved_envs} envs, and its env has {self.n_envs}: "
-                f"{type(self).__name__} resets the envs. (load(..., force_reset=False) continues the saved envs' "
-                "episodes only with the same number of envs; the learned parameters and counts are kept)",
-                stacklevel=3,
-            )
-            self._last_obs = None
-        elif not reset_num_timesteps and self._last_obs is not None and self._episodes_missing_their_start():
-            # A model loaded with force_reset=False: the file has the envs' last observations but not the buffer, so
-            # the episodes in progress would be trained from where the file left them as if they began there (the
-            # wrong t in γ^t and in episode lengths, REINFORCE's returns of a part of an episode)
-            warnings.warn(
-                "The episodes in progress when this model was saved are not in its file (the buffer is not saved): "
-                f"{type(self).__name__} resets the envs to train on whole episodes. (load(..., force_reset=False) "
-                "cannot continue an episode here; the learned parameters and counts are kept)",
-                stacklevel=3,
-            )
+        reason = None
+        if not reset_num_timesteps and self._last_obs is not None:
+            if saved_envs not in (None, self.n_envs):
+                # load(..., env=<another number of envs>, force_reset=False): the file's last observations are of
+                # other envs (NumPy's "operands could not be broadcast" otherwise)
+                reason = (
+                    f"This model's file holds the last observations of {saved_envs} envs, and its env has {self.n_envs}: "
+                    f"{type(self).__name__} resets the envs. (load(..., force_reset=False) continues the saved envs' "
+                    "episodes only with the same number of envs"
+                )
+            elif self._episodes_missing_their_start():
+                # A model loaded with force_reset=False: the file has the envs' last observations but not the buffer,
+                # so the episodes in progress would be trained from where the file left them as if they began there
+                # (the wrong t in γ^t and in episode lengths, REINFORCE's returns of a part of an episode)
+                reason = (
+                    "The episodes in progress when this model was saved are not in its file (the buffer is not saved): "
+                    f"{type(self).__name__} resets the envs to train on whole episodes. (load(..., force_reset=False) "
+                    "cannot continue an episode here"
+                )
+        if reason is not None:
+            warnings.warn(f"{reason}; the learned parameters and counts are kept)", stacklevel=3)
             self._last_obs = None
         if reset_num_timesteps or self._last_obs is None:
             # The envs are about to be reset: the episodes in progress in the buffer cannot be continued

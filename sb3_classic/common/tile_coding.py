@@ -403,21 +403,23 @@ class TileCoding(BaseFeaturesExtractor):
             )
         n_dims = int(np.prod(observation_space.shape))
         for name, given, bound in (("low", low, observation_space.low), ("high", high, observation_space.high)):
+            if given is not None:
+                continue
+            # Gymnasium's flags: False for ±inf, and for an integer Box's, which it stores as its dtype's limits
             bounded = observation_space.bounded_below if name == "low" else observation_space.bounded_above
-            if given is None and not (np.all(bounded) and np.all(np.abs(bound.astype(np.float64)) < UNBOUNDED)):
-                what = (
-                    # (an integer Box's ±inf are stored as its dtype's limits, marked unbounded)
-                    "infinite"
-                    if not (np.all(np.isfinite(bound)) and np.all(bounded))
-                    # ±3.4e38, the float32 limit: envs' "unbounded" (CartPole's velocities before Gymnasium 1.0); tiles
-                    # that wide put every observation in one
-                    else f"at ±{np.abs(bound).max():.3g}, envs' way of saying unbounded (every observation would fall in "
-                    "one tile)"
-                )
-                raise ValueError(
-                    f"{name}=None takes the observation space's bounds, but they are {what} ({_shown(bound)}): pass a "
-                    f"finite {name} (one number, or one per dimension), the range the observations actually take"
-                )
+            largest = float(np.abs(bound.astype(np.float64)).max(initial=0.0))
+            if not np.all(bounded):
+                what = "infinite"
+            elif largest >= UNBOUNDED:
+                # ±3.4e38, the float32 limit: envs' "unbounded" (CartPole's velocities before Gymnasium 1.0); tiles that
+                # wide put every observation in one
+                what = f"at ±{largest:.3g}, envs' way of saying unbounded (every observation would fall in one tile)"
+            else:
+                continue
+            raise ValueError(
+                f"{name}=None takes the observation space's bounds, but they are {what} ({_shown(bound)}): pass a "
+                f"finite {name} (one number, or one per dimension), the range the observations actually take"
+            )
         low = observation_space.low.ravel().tolist() if low is None else low
         high = observation_space.high.ravel().tolist() if high is None else high
         tiles, lows, highs = _check_grid(n_tilings, tiles_per_dim, low, high, hash_size, origin, n_dims)

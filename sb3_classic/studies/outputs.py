@@ -449,18 +449,27 @@ def _empty_run_notes(results: StudyResults) -> list[str]:
 def _short_budget_notes(study: StudySpec) -> list[str]:
     """:return: what a budget too short for a metric makes of it (a reduced run's, typically)"""
     episodes = study.budget.episodes
-    if episodes is None:
-        return []
+    return [] if episodes is None else _short_run_notes(study, episodes, "per run")
+
+
+def _short_run_notes(study: StudySpec, fewest: int, whose: str) -> list[str]:
+    """
+    :param study: the study
+    :param fewest: the fewest episodes a run has (an episode budget's, or the fewest a seed completed in env steps)
+    :param whose: whose episodes those are, for the notes ("per run", "for the seed with the fewest")
+    :return: what so few episodes make of the last-100 mean and of episodes to threshold
+    """
     notes = []
-    if episodes <= stats.LAST_EPISODES:
+    if 0 < fewest <= stats.LAST_EPISODES:
         notes.append(
-            f"- **{episodes} episodes per run**: the mean over the last {stats.LAST_EPISODES} episodes is the mean over "
-            "all of them."
+            f"- **{fewest} episodes** {whose}: the mean over the last {stats.LAST_EPISODES} episodes of a seed with at "
+            "most that many is the mean over all of them."
         )
-    if episodes < study.threshold_window:
+    if 0 < fewest < study.threshold_window:
         notes.append(
-            f"- **{episodes} episodes per run**, fewer than the threshold's window of {study.threshold_window}: no seed "
-            f"can reach the threshold, and episodes to threshold is the budget for every seed."
+            f"- **{fewest} episodes**, fewer than the threshold's window of {study.threshold_window}, {whose}: a seed "
+            "with fewer episodes than the window cannot reach the threshold, and its episodes to threshold is its "
+            "episode count (censored)."
         )
     return notes
 
@@ -470,28 +479,16 @@ def _step_budget_notes(results: StudyResults) -> list[str]:
     study = results.study
     if study.budget.episodes is not None:
         return []
-    notes = [
+    note = (
         "- **A budget in env steps**: seeds complete different numbers of episodes. The table's Episodes are the "
         "fewest and the most a seed of the variant completed; each seed's metrics are over all of its own episodes; "
         "the figure's curves are over the first episodes, as many as every seed of the variant completed. A run stops "
         "at the end of the update that reaches the budget (SARSA's rollouts take `train_freq` steps of every env, "
         "REINFORCE's update waits for its episodes to end), so it may take a few more steps, and the episodes it "
         "completes are all counted."
-    ]
-    counts = [count for seeds in results.episode_counts.values() for count in seeds]
-    fewest = min(counts, default=0)
-    if 0 < fewest <= stats.LAST_EPISODES:
-        notes.append(
-            f"- **{fewest} episodes** for the seed with the fewest: the mean over the last {stats.LAST_EPISODES} "
-            "episodes of a seed with at most that many is the mean over all of them."
-        )
-    if 0 < fewest < study.threshold_window:
-        notes.append(
-            f"- **{fewest} episodes**, fewer than the threshold's window of {study.threshold_window}, for the seed with "
-            "the fewest: a seed with fewer episodes than the window cannot reach the threshold, and its episodes to "
-            "threshold is its episode count (censored)."
-        )
-    return notes
+    )
+    fewest = min((count for seeds in results.episode_counts.values() for count in seeds), default=0)
+    return [note, *_short_run_notes(study, fewest, "for the seed with the fewest")]
 
 
 def plural(count: int, one: str, many: str) -> str:
