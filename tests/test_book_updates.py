@@ -449,8 +449,13 @@ def test_plain_reinforce_saves_and_loads(tmp_path: Any) -> None:
         lambda: loaded.policy(th.zeros(1, 4)),
         lambda: loaded.policy.evaluate_actions(th.zeros(1, 4), th.zeros(1)),
     ):
-        with pytest.raises(ValueError, match=r"use_baseline=False.*get_distribution"):
+        with pytest.raises(
+            ValueError, match=r"use_baseline=False.*get_distribution.*wrap policy\._predict\(obs, deterministic=True\)"
+        ):
             returns_values()
+    # What the message offers for an export acts as predict does
+    actions = loaded.policy._predict(th.as_tensor(obs), deterministic=True).numpy()
+    np.testing.assert_array_equal(actions, model.predict(obs, deterministic=True)[0])
     assert loaded.policy.get_distribution(th.zeros(1, 4)).log_prob(th.zeros(1)).shape == (1,)
     loaded.learn(200)
 

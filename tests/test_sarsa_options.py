@@ -155,6 +155,8 @@ def test_predict_is_greedy_in_the_average(tmp_path: Path) -> None:
         average.q_net[-1].bias.copy_(th.tensor([-1e3, 1e3]))  # type: ignore[operator]
         model.policy.q_net.q_net[-1].bias.copy_(th.tensor([1e3, -1e3]))  # type: ignore[operator]
     np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], np.ones(64))
+    # What an export wraps (README: SB3's recipes trace model.policy): the same greedy actions
+    np.testing.assert_array_equal(model.policy(th.as_tensor(obs)).numpy(), np.ones(64))
     model.exploration_rate = 0.0
     with th.no_grad():  # as in the rollout loop
         np.testing.assert_array_equal(model._sample_actions(obs), np.zeros(64), "the behaviour policy is q̂'s")

@@ -454,3 +454,29 @@ def test_tilings_that_coincide_and_too_small_hashes_warn() -> None:
         TileCoding(spaces.Box(0.0, 1.0, (1,)), n_tilings=5)  # one dimension: offset 1
         TileCoding(BOX, hash_size=8)
     assert len({tuple(row) for row in eight.active_tiles_numpy(velocities).tolist()}) > 4 * len(single)
+
+
+@pytest.mark.parametrize("hash_size", [None, 512])
+def test_exported_policy_acts_as_predict(hash_size: int | None) -> None:
+    """
+    SB3's export recipes (``torch.jit.trace``, ``torch.export``) on a tile-coded policy: its features must be traced, not
+    baked in (the CPU's NumPy features were: the traced module gave the tracing input's actions for every input), and
+    the batch size must stay free (it was recorded from ``len``).
+    """
+    tiles = dict(n_tilings=8, tiles_per_dim=8, low=(-1.2, -0.07), high=(0.5, 0.07), hash_size=hash_size)
+    kwargs = dict(features_extractor_class=TileCoding, features_extractor_kwargs=tiles, net_arch=[])
+    model = NStepSARSA("MlpPolicy", "MountainCar-v0", policy_kwargs=kwargs, seed=0, device="cpu")
+    layer = model.policy.linear_layer
+    assert layer is not None
+    with th.no_grad():
+        layer.weight.normal_(generator=th.Generator().manual_seed(0))
+    observations = th.as_tensor(np.random.default_rng(0).uniform((-1.2, -0.07), (0.6, 0.07), (100, 2)), dtype=th.float32)
+    greedy = model.predict(observations.numpy(), deterministic=True)[0]
+    assert len(set(greedy.tolist())) == 3  # (the weights make every action greedy somewhere)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no TracerWarning: nothing in the trace is a constant of the tracing input
+        warnings.filterwarnings("ignore", r"`torch\.jit\.trace", DeprecationWarning)  # (torch 2.13 deprecates it)
+        traced = th.jit.trace(model.policy.eval(), observations[:1])
+    np.testing.assert_array_equal(traced(observations).numpy(), greedy)
+    exported = th.export.export(model.policy.q_net, (observations[:3],), dynamic_shapes=({0: th.export.Dim("batch")},))
+    np.testing.assert_array_equal(exported.module()(observations).argmax(dim=1).numpy(), greedy)

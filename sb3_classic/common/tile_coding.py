@@ -178,6 +178,11 @@ def _nan_message(x: np.ndarray) -> str:
     )
 
 
+def _tracing() -> bool:
+    """:return: whether ``torch.jit.trace``, ``torch.compile`` or ``torch.export`` is tracing the call (an export)"""
+    return th.jit.is_tracing() or th.compiler.is_compiling()
+
+
 def _coordinates(
     observations: th.Tensor,
     n_tilings: int,
@@ -192,8 +197,10 @@ def _coordinates(
 
     :raises ValueError: if an observation holds NaN
     """
-    x = th.clamp(observations.reshape(len(observations), -1).to(th.float64), low, high)
-    if th.isnan(x).any():
+    # (shape[0], not len(): torch.jit.trace records it as the batch size of each call, not a constant)
+    x = th.clamp(observations.reshape(observations.shape[0], -1).to(th.float64), low, high)
+    # (not while tracing or exporting, which record no data-dependent branch: the NaN check is an eager one)
+    if not _tracing() and th.isnan(x).any():
         raise ValueError(_nan_message(x.cpu().numpy()))
     # Position in tile widths from the origin (§9.5.4: tiles of width (high − low) / tiles_per_dim)
     scaled = tiles_per_dim * (x - origin) / (high - low)
@@ -459,10 +466,12 @@ class TileCoding(BaseFeaturesExtractor):
             ``hash_size``, the count of tilings hashed to each feature (collisions give 2 or more; each row sums to
             n_tilings)
         """
-        if observations.device.type == "cpu" and self.hash_size is None:
+        if observations.device.type == "cpu" and self.hash_size is None and not _tracing():
+            # (NumPy is invisible to torch.jit.trace and torch.export: a traced module would return the tracing input's
+            # features for every input, so they get the PyTorch path, which gives the same features)
             return th.from_numpy(self._dense_features_numpy(observations.detach().numpy()))
         indices = self.active_tiles(observations)
-        features = th.zeros(len(indices), self.features_dim, dtype=th.float32, device=indices.device)
+        features = th.zeros(indices.shape[0], self.features_dim, dtype=th.float32, device=indices.device)
         ones = th.ones(indices.shape, dtype=th.float32, device=indices.device)
         # Hashed tiles may collide: count them, so that w·x = Σ_t w[index_t] as with tiles3
         return features.scatter_add_(1, indices, ones)

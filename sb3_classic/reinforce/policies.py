@@ -166,7 +166,8 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
             raise ValueError(
                 f"This policy has no value network (use_baseline=False): v̂ is not defined, and {method} returns it. "
                 "For actions and their log-probabilities use policy.get_distribution(obs) (.get_actions(), "
-                ".log_prob(actions), .entropy()) or predict(obs)"
+                ".log_prob(actions), .entropy()) or predict(obs); to export the policy (SB3's recipe wraps "
+                "policy(obs, deterministic=True)), wrap policy._predict(obs, deterministic=True), which returns the actions"
             )
 
     def forward(self, obs: th.Tensor, deterministic: bool = False) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
