@@ -140,6 +140,91 @@ def test_per_step_nstep_sarsa_is_the_books(n: int) -> None:
     assert np.abs(expected - w0).max() > 1e-2
 
 
+class StepRecorder(gym.Wrapper[Any, Any, Any, Any]):
+    """Records every (S_t, A_t, R_{t+1}, terminated) of the env it wraps."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.steps: list[tuple[int, int, float, bool]] = []
+        self._state = 0
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        self._state = int(obs)
+        return obs, info
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.steps.append((self._state, int(action), float(reward), terminated))
+        self._state = int(obs)
+        return obs, reward, terminated, truncated, info
+
+
+def reference_tabular_sarsa(
+    steps: list[tuple[int, int, float, bool]], n_states: int, n_actions: int, alpha: float, epsilon: float, expected: bool
+) -> np.ndarray:
+    """
+    The box of §6.4 (one-step SARSA), or Expected SARSA (§6.6, eq. 6.9: Σ_a π(a|S')Q(S', a) under the ε-greedy π),
+    γ = 1, Q = 0 at the start and at terminal states, replaying the recorded steps; a step is updated once A_{t+1} is
+    known (the last one of an unfinished episode is not).
+    """
+    q = np.zeros((n_states, n_actions), dtype=np.float32)
+    for t, (state, action, reward, terminated) in enumerate(steps):
+        if terminated:
+            target = np.float32(reward)
+        elif t + 1 < len(steps):
+            next_state, next_action = steps[t + 1][:2]
+            next_value = (
+                (1 - epsilon) * q[next_state].max() + epsilon * q[next_state].mean()
+                if expected
+                else q[next_state, next_action]
+            )
+            target = np.float32(reward) + np.float32(next_value)
+        else:
+            break
+        q[state, action] += np.float32(alpha) * (target - q[state, action])  # Q(S, A) ← Q(S, A) + α[target − Q(S, A)]
+    return q
+
+
+@pytest.mark.parametrize("expected", [False, True], ids=["sarsa", "expected sarsa"])
+def test_tabular_sarsa_on_cliff_walking_is_the_books(expected: bool) -> None:
+    """
+    The README's tabular recipe (a Discrete observation, which SB3 one-hot encodes, under the linear recipe) on Example
+    6.6's Cliff Walking with its settings (α = 0.5, ε = 0.1, γ = 1, no time limit): the table after 30 episodes is the
+    book's box's, replaying the same actions.
+    """
+    env_id = "CliffWalking-v1" if "CliffWalking-v1" in gym.registry else "CliffWalking-v0"  # (v1 from Gymnasium 1.1)
+    env = StepRecorder(gym.make(env_id))
+    model = NStepSARSA(
+        "MlpPolicy",
+        vec(env),
+        learning_rate=0.5,
+        n_steps=1,
+        train_freq=1,
+        gradient_steps=1,
+        update_mode="per_step",
+        gamma=1.0,
+        expected_sarsa=expected,
+        exploration_initial_eps=0.1,
+        exploration_final_eps=0.1,
+        policy_kwargs=linear_sgd(weight_init=0.0),
+        seed=0,
+        device="cpu",
+    )
+
+    def first_step_of_episode_31(_locals: dict[str, Any], _globals: dict[str, Any]) -> bool:
+        # (StopTrainingOnMaxEpisodes would stop at episode 30's last step, before its last two updates)
+        return sum(terminated for *_, terminated in env.steps) < 30 or env.steps[-1][3]
+
+    model.learn(10**6, callback=first_step_of_episode_31)
+    assert sum(terminated for *_, terminated in env.steps) == 30
+    assert any(reward == -100 for _, _, reward, _ in env.steps), "the agent should have fallen off the cliff"
+    table = reference_tabular_sarsa(env.steps, 48, 4, alpha=0.5, epsilon=0.1, expected=expected)
+    # w[a, s] = Q(s, a): the weight of state s's one-hot feature
+    np.testing.assert_allclose(weights(model.policy.q_net.q_net[0]).T, table, rtol=0, atol=1e-5)
+    assert np.abs(table).max() > 10
+
+
 @pytest.mark.parametrize(
     "kwargs",
     [dict(n_steps=1), dict(n_steps=3, expected_sarsa=True), dict(n_steps=2, exploration_schedule="linear")],
