@@ -1027,3 +1027,120 @@ def test_a_file_of_the_other_algorithm_is_named_as_such(
     ) in str(error.value)
     # ... and the file itself is intact
     assert isinstance(saved_class.load(tmp_path / "model.zip"), saved_class)
+
+
+# --- Pre-empted jobs: checkpoints and resuming (a researcher's trial) ------------------------------------------------
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_save_replaces_the_file_whole(
+    model_class: type[BaseAlgorithm], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """
+    A save interrupted midway (a pre-empted job: here an error while writing) leaves the earlier file whole and loadable,
+    and no temporary file; SB3 wrote over the file in place, and a job killed then lost its checkpoint.
+    """
+    model = make_model(model_class, seed=0).learn(200)
+    model.save(tmp_path / "checkpoints" / "model")  # (the folder is created, .zip added, as SB3 does)
+    saved = (tmp_path / "checkpoints" / "model.zip").read_bytes()
+    model.learn(200, reset_num_timesteps=False)
+
+    def interrupted(*args: Any, **kwargs: Any) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(th, "save", interrupted)  # (SB3 writes the data first, then each state dict with th.save)
+    with pytest.raises(KeyboardInterrupt):
+        model.save(tmp_path / "checkpoints" / "model")
+    monkeypatch.undo()
+    assert (tmp_path / "checkpoints" / "model.zip").read_bytes() == saved
+    assert [path.name for path in (tmp_path / "checkpoints").iterdir()] == ["model.zip"]
+    loaded = model_class.load(tmp_path / "checkpoints" / "model", device="cpu")
+    assert loaded.num_timesteps < model.num_timesteps
+    model.save(tmp_path / "checkpoints" / "model")
+    assert model_class.load(tmp_path / "checkpoints" / "model.zip", device="cpu").num_timesteps == model.num_timesteps
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_set_parameters_that_fail_leave_the_model_as_it_was(model_class: type[BaseAlgorithm]) -> None:
+    """SB3's set_parameters changed the model, then raised: a trained model was left with part of other weights."""
+    model = make_model(model_class, seed=0).learn(200)
+    before = copy.deepcopy(model.get_parameters())
+    other = make_model(model_class, seed=1, policy_kwargs=dict(net_arch=[16, 8])).get_parameters()
+    with pytest.raises(RuntimeError, match="size mismatch"):
+        model.set_parameters(other)  # the first layer matches, the next ones do not
+    assert parameters_equal(model.get_parameters(), before)
+    with pytest.raises(ValueError, match="Names of parameters do not match"):
+        model.set_parameters({"policy": make_model(model_class, seed=1).get_parameters()["policy"]})  # no optimizers
+    assert parameters_equal(model.get_parameters(), before)
+    # An optimizer's state of another class: refused (learn() then failed on a missing 'betas')
+    sgd = make_model(model_class, seed=1, policy_kwargs=dict(net_arch=[16], optimizer_class=th.optim.SGD)).get_parameters()
+    with pytest.raises(ValueError, match=r"policy\.optimizer .*lacks the hyperparameters .*betas"):
+        model.set_parameters(sgd)
+    assert parameters_equal(model.get_parameters(), before)
+    model.set_parameters(make_model(model_class, seed=1).get_parameters())  # a matching one still loads
+    assert not parameters_equal(model.get_parameters(), before)
+    model.learn(100)
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_load_refuses_what_is_not_an_argument(model_class: type[BaseAlgorithm], tmp_path: Path) -> None:
+    """SB3 set a misspelt argument as an attribute, which nothing read: the run went on with the saved value."""
+    make_model(model_class, seed=0).save(tmp_path / "model")
+    misspelt = "exploration_final_esp" if model_class is NStepSARSA else "value_learning_rat"
+    with pytest.raises(TypeError, match=rf"{misspelt}=0.01, which is not an argument .*did you mean {misspelt[:-3]}"):
+        model_class.load(tmp_path / "model", **{misspelt: 0.01})  # type: ignore[arg-type]
+    loaded: Any = model_class.load(tmp_path / "model", gamma=0.9, seed=3)
+    assert loaded.gamma == 0.9  # (arguments still change)
+
+
+@pytest.mark.parametrize(
+    ("model_class", "change"),
+    [
+        (NStepSARSA, dict(target_update_interval=1)),
+        (NStepSARSA, dict(averaging_tau=0.05)),
+        (REINFORCE, dict(use_baseline=False)),
+    ],
+)
+def test_custom_objects_that_change_the_networks_are_named(
+    model_class: type[BaseAlgorithm], change: dict[str, Any], tmp_path: Path
+) -> None:
+    """As the same change through kwargs is (it gave PyTorch's "Missing key(s) in state_dict")."""
+    make_model(model_class, seed=0).save(tmp_path / "model")
+    (key, value), saved = next(iter(change.items())), model_class.load(tmp_path / "model").__dict__
+    with pytest.raises(ValueError, match=rf"{key}={value!r} builds other networks .*Pass {key}={saved[key]!r}"):
+        model_class.load(tmp_path / "model", custom_objects=change)
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_learn_without_an_env_says_how_to_give_one(model_class: type[BaseAlgorithm], tmp_path: Path) -> None:
+    make_model(model_class, seed=0).save(tmp_path / "model")
+    loaded = model_class.load(tmp_path / "model")
+    with pytest.raises(ValueError, match=r"no env to train on .*set_env"):  # (SB3: a bare AssertionError)
+        loaded.learn(100)
+    loaded.set_env(make_vec_env("CartPole-v1"))
+    loaded.learn(100)
+
+
+@pytest.mark.parametrize(
+    ("model_class", "settings", "n_envs"),
+    [
+        (model_class, settings, n_envs)
+        for model_class in MODEL_LIST
+        for settings in (dict(), dict(update_mode="per_step"))
+        for n_envs in (1, 3)
+        if not (model_class is REINFORCE and settings and n_envs > 1)  # (the slowest, and no other code path)
+    ],
+)
+def test_learn_in_two_calls_is_learn_in_one(model_class: type[BaseAlgorithm], settings: dict[str, Any], n_envs: int) -> None:
+    """The README's idiom for a run split in two (a resumed job): the parameters and optimizers of one call, to the bit."""
+    if model_class is NStepSARSA and settings:
+        settings = dict(settings, train_freq=1, gradient_steps=1)
+
+    def model() -> Any:
+        return make_model(model_class, make_vec_env("CartPole-v1", n_envs=n_envs, seed=0), seed=0, **settings)
+
+    whole = model().learn(500)
+    split = model().learn(200)
+    split.learn(500 - split.num_timesteps, reset_num_timesteps=False)
+    assert split.num_timesteps == whole.num_timesteps
+    assert parameters_equal(split.get_parameters(), whole.get_parameters())

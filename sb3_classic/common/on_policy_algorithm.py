@@ -1,15 +1,19 @@
 """The base class of sb3_classic's algorithms: SB3's on-policy loop around a buffer that keeps whole trajectories."""
 
 import contextvars
+import copy
+import difflib
 import inspect
 import io
 import math
 import numbers
+import os
 import pathlib
 import re
+import uuid
 import warnings
 from abc import abstractmethod
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
@@ -18,8 +22,8 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.save_util import load_from_zip_file
-from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.common.save_util import load_from_zip_file, recursive_getattr
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule, TensorDict
 from stable_baselines3.common.utils import check_for_correct_spaces, update_learning_rate
 from stable_baselines3.common.vec_env import VecEnv
 
@@ -201,23 +205,37 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         :param force_reset: reset the envs before training
         :param kwargs: arguments to change
         :return: the model
-        :raise ValueError: for an invalid value, or one that changes the networks
+        :raise TypeError: for an argument the constructor does not have (SB3 sets it as an attribute, which nothing reads:
+            a misspelt ``exploration_final_esp`` would be ignored)
+        :raise ValueError: for an invalid value, or one that changes the networks (in ``kwargs`` or ``custom_objects``)
         """
+        defaults = inspect.signature(cls.__init__).parameters
+        arguments = [name for name in defaults if name not in ("self", "policy", "env", "_init_setup_model")]
+        for key in kwargs:
+            if key not in arguments:
+                close = difflib.get_close_matches(key, arguments, n=1)
+                raise TypeError(
+                    f"{cls.__name__}.load() got {key}={kwargs[key]!r}, which is not an argument of {cls.__name__}"
+                    + (f" (did you mean {close[0]}?)" if close else "")
+                    + ": load() changes the constructor's arguments only (set other attributes on the loaded model)"
+                )
         token = LOADING.set(True)
         try:
             return super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
         except RuntimeError as error:
-            if "state_dict" not in str(error) or not set(kwargs) & set(cls._network_arguments):
+            # custom_objects replace saved values as kwargs do (without the check of _setup_model's arguments)
+            changes = {**(custom_objects or {}), **kwargs}
+            if "state_dict" not in str(error) or not set(changes) & set(cls._network_arguments):
                 raise
             if isinstance(path, io.BufferedIOBase):
                 path.seek(0)
-            data, _, _ = load_from_zip_file(path, load_data=True, device="cpu", custom_objects=custom_objects)
-            defaults = inspect.signature(cls.__init__).parameters
+            others = {key: value for key, value in (custom_objects or {}).items() if key not in cls._network_arguments}
+            data, _, _ = load_from_zip_file(path, load_data=True, device="cpu", custom_objects=others)
             saved = {key: (data or {}).get(key, defaults[key].default) for key in cls._network_arguments}
             changed = [
-                (key, kwargs[key], saved[key])
+                (key, changes[key], saved[key])
                 for key, builds in cls._network_arguments.items()
-                if key in kwargs and builds(kwargs[key]) != builds(saved[key])
+                if key in changes and builds(changes[key]) != builds(saved[key])
             ]
             if not changed:
                 raise
@@ -229,6 +247,77 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
             ) from error
         finally:
             LOADING.reset(token)
+
+    def save(
+        self,
+        path: str | pathlib.Path | io.BufferedIOBase,
+        exclude: Iterable[str] | None = None,
+        include: Iterable[str] | None = None,
+    ) -> None:
+        """
+        SB3's ``save``, written to a temporary file beside the target and then renamed onto it (``os.replace``, atomic):
+        a process killed while saving (a pre-empted job, a ``CheckpointCallback`` mid-write) leaves the earlier file
+        whole, and a process loading it meanwhile reads the old or the new model, never a part (SB3 overwrites in
+        place). The target is SB3's: ``.zip`` is added to a path without a suffix, and missing folders are created.
+
+        :param path: where to save (a file-like object is written directly)
+        :param exclude: names of the attributes not to save, beside the default ones
+        :param include: names of the attributes to save although excluded by default
+        """
+        if not isinstance(path, (str, os.PathLike)):
+            super().save(path, exclude, include)
+            return
+        target = pathlib.Path(path)
+        if target.suffix == "":
+            target = target.with_name(f"{target.name}.zip")
+        if target.is_dir():
+            super().save(path, exclude, include)  # (SB3 saves beside the folder, with a warning)
+            return
+        target.parent.mkdir(parents=True, exist_ok=True)
+        temporary = target.with_name(f".{target.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.partial.zip")
+        try:
+            super().save(temporary, exclude, include)
+            os.replace(temporary, target)
+        finally:
+            temporary.unlink(missing_ok=True)
+
+    def set_parameters(
+        self,
+        load_path_or_dict: str | TensorDict,
+        exact_match: bool = True,
+        device: th.device | str = "auto",
+    ) -> None:
+        """
+        SB3's ``set_parameters``, all or nothing: if it raises, the networks and optimizers are left as they were (SB3's
+        keeps what it loaded before the error: the weights of a dict whose other entries do not match, the first layer
+        of another architecture). ``load()`` uses it.
+
+        :param load_path_or_dict: a saved model's file, or a dict of ``get_parameters()``'s form
+        :param exact_match: every network and optimizer must be given, with every parameter
+        :param device: where the parameters go
+        :raises ValueError: also for an optimizer's state of another optimizer class (its hyperparameters differ: SGD's
+            into Adam made the next ``learn()`` fail on a missing ``betas``)
+        """
+        names, _ = self._get_torch_save_params()
+        before = {name: copy.deepcopy(recursive_getattr(self, name).state_dict()) for name in names}
+        try:
+            super().set_parameters(load_path_or_dict, exact_match, device)
+            for name in names:
+                optimizer = recursive_getattr(self, name)
+                if isinstance(optimizer, th.optim.Optimizer):
+                    # (a key the optimizer's class has added since a file was saved gets its default on loading)
+                    needed = set().union(*before[name]["param_groups"]) - {"params"}
+                    missing = sorted(needed - set().union(*optimizer.param_groups))
+                    if missing:
+                        raise ValueError(
+                            f"set_parameters: the state given for {name} ({type(optimizer).__name__}) is of another "
+                            f"optimizer: it lacks the hyperparameters {', '.join(missing)}. Pass the state of the same "
+                            "optimizer class, or leave that entry out with exact_match=False"
+                        )
+        except BaseException:
+            for name, state in before.items():
+                recursive_getattr(self, name).load_state_dict(state)
+            raise
 
     def _check_arguments(self) -> None:
         """
@@ -668,6 +757,12 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
                 "log_interval",
                 log_interval,
                 hint=f"Pass the updates between two logger dumps{self._log_interval_choices()} or None (no dumps)",
+            )
+        if self.env is None:
+            # (SB3 asserts, with no message)
+            raise ValueError(
+                f"{type(self).__name__}.learn: this model has no env to train on (it was loaded without one): pass env=... "
+                f"to {type(self).__name__}.load, or call model.set_env(env) first"
             )
         iteration = 0
         total_timesteps, callback = self._setup_learn(
