@@ -222,15 +222,18 @@ class TrajectoryBuffer(BaseBuffer):
         """
         if isinstance(trained, int):
             assert self.n_envs == 1, "a count of trained transitions needs one env (a mask otherwise)"
-            assert self.start[0] + trained <= self.pos, "trained: more transitions than pending"
-            self.start += trained
-        else:
-            start = self.start + np.count_nonzero(trained, axis=0)
-            rows = np.arange(self.pos)[:, None]
-            assert (trained == ((rows >= self.start) & (rows < start))).all(), (
-                "trained must be the first pending transitions of each env (each once, in time order)"
-            )
-            self.start = start
+            # (Python ints: NumPy's calls on the one-element array cost more than the rest of this, every env step)
+            start = int(self.start[0]) + trained
+            assert start <= self.pos, "trained: more transitions than pending"
+            self.start[0] = start
+            self._drop_rows(start)
+            return
+        start = self.start + np.count_nonzero(trained, axis=0)
+        rows = np.arange(self.pos)[:, None]
+        assert (trained == ((rows >= self.start) & (rows < start))).all(), (
+            "trained must be the first pending transitions of each env (each once, in time order)"
+        )
+        self.start = start
         self._drop_rows(int(self.start.min()))
 
     def _drop_rows(self, n_rows: int) -> None:
