@@ -16,10 +16,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import pytest
+import torch as th
 from rich.console import Console
 
 from benchmarks import hot_paths, per_step_speed, textbook
 from benchmarks.common import REPO_ROOT, parse_overrides
+from benchmarks.diagnostics import per_step_overhead
 from benchmarks.diagnostics.common import Variant, collect
 from benchmarks.report import (
     Results,
@@ -587,3 +589,22 @@ def test_run_names_are_shown_as_they_are(
     assert failed == specs[1:]
     assert "done: study a [reading] seed 0" in output
     assert "failed: study a [reading] seed 1: boom" in output
+
+
+def test_per_step_overhead_puts_everything_back(tmp_path: Path) -> None:
+    """The diagnostic replaces class attributes for its variants; afterwards every one is the package's and torch's again."""
+    owners = (
+        NStepSARSA,
+        per_step_overhead.Logger,
+        per_step_overhead.TrajectoryBuffer,
+        th.Tensor,
+        th.optim.Adam,
+        th.nn.Sequential,
+    )
+    NStepSARSA("MlpPolicy", "CartPole-v1", device="cpu")  # (torch wraps Adam.step with its hooks at a first Adam)
+    before = [dict(vars(owner)) for owner in owners]
+    assert per_step_overhead.main(["--steps", "60", "--repeats", "1", "--output", str(tmp_path / "out.md")]) == 0
+    assert [dict(vars(owner)) for owner in owners] == before
+    text = (tmp_path / "out.md").read_text()
+    for row in ("| the package |", "| without its bookkeeping |", "| PyTorch loop |"):
+        assert row in text
