@@ -1058,6 +1058,14 @@ def test_save_replaces_the_file_whole(
     assert loaded.num_timesteps < model.num_timesteps
     model.save(tmp_path / "checkpoints" / "model")
     assert model_class.load(tmp_path / "checkpoints" / "model.zip", device="cpu").num_timesteps == model.num_timesteps
+    # As SB3's save: the file keeps its permission bits, and a symbolic link is written through, not replaced
+    (tmp_path / "checkpoints" / "model.zip").chmod(0o640)
+    (tmp_path / "latest.zip").symlink_to(tmp_path / "checkpoints" / "model.zip")
+    model.learn(100, reset_num_timesteps=False)
+    model.save(tmp_path / "latest.zip")
+    assert (tmp_path / "latest.zip").is_symlink()
+    assert (tmp_path / "checkpoints" / "model.zip").stat().st_mode & 0o777 == 0o640
+    assert model_class.load(tmp_path / "latest.zip", device="cpu").num_timesteps == model.num_timesteps
 
 
 @pytest.mark.parametrize("model_class", MODEL_LIST)
@@ -1079,6 +1087,9 @@ def test_set_parameters_that_fail_leave_the_model_as_it_was(model_class: type[Ba
     assert parameters_equal(model.get_parameters(), before)
     model.set_parameters(make_model(model_class, seed=1).get_parameters())  # a matching one still loads
     assert not parameters_equal(model.get_parameters(), before)
+    # So does one into an optimizer with a scheduler attached (its initial_lr is not in the state given)
+    th.optim.lr_scheduler.StepLR(model.policy.optimizer, step_size=10)
+    model.set_parameters(make_model(model_class, seed=2).get_parameters())
     model.learn(100)
 
 
@@ -1091,6 +1102,20 @@ def test_load_refuses_what_is_not_an_argument(model_class: type[BaseAlgorithm], 
         model_class.load(tmp_path / "model", **{misspelt: 0.01})  # type: ignore[arg-type]
     loaded: Any = model_class.load(tmp_path / "model", gamma=0.9, seed=3)
     assert loaded.gamma == 0.9  # (arguments still change)
+    with pytest.raises(TypeError, match="keeps its saved policy class"):
+        model_class.load(tmp_path / "model", policy="MlpPolicy")
+
+    class Subclass(model_class):  # type: ignore[valid-type,misc]
+        """A subclass passing its parent's arguments on through **kwargs: they are arguments too."""
+
+        def __init__(self, *args: Any, bonus: float = 0.0, **kwargs: Any) -> None:
+            self.bonus = bonus
+            super().__init__(*args, **kwargs)
+
+    Subclass("MlpPolicy", "CartPole-v1", policy_kwargs=dict(net_arch=[16]), seed=0, device="cpu").save(tmp_path / "subclass")
+    assert Subclass.load(tmp_path / "subclass", gamma=0.9, bonus=1.0, verbose=0).gamma == 0.9
+    with pytest.raises(TypeError, match="did you mean gamma"):
+        Subclass.load(tmp_path / "subclass", gama=0.9)
 
 
 @pytest.mark.parametrize(

@@ -480,3 +480,15 @@ def test_exported_policy_acts_as_predict(hash_size: int | None) -> None:
     np.testing.assert_array_equal(traced(observations).numpy(), greedy)
     exported = th.export.export(model.policy.q_net, (observations[:3],), dynamic_shapes=({0: th.export.Dim("batch")},))
     np.testing.assert_array_equal(exported.module()(observations).argmax(dim=1).numpy(), greedy)
+
+
+def test_compiled_policy_still_refuses_nan() -> None:
+    """``torch.compile`` for speed (not an export) keeps the NaN check, at a graph break (it gave an index error)."""
+    tiles = dict(n_tilings=8, tiles_per_dim=8, low=(-1.2, -0.07), high=(0.5, 0.07))
+    kwargs = dict(features_extractor_class=TileCoding, features_extractor_kwargs=tiles, net_arch=[])
+    model = NStepSARSA("MlpPolicy", "MountainCar-v0", policy_kwargs=kwargs, seed=0, device="cpu")
+    compiled = th.compile(model.policy.q_net, backend="eager")
+    observations = th.tensor([[0.1, 0.01], [-0.5, 0.0]])
+    assert th.equal(compiled(observations), model.policy.q_net(observations))
+    with pytest.raises(ValueError, match="observation 1 of the batch holds NaN"):
+        compiled(th.tensor([[0.1, 0.01], [float("nan"), 0.0]]))

@@ -10,6 +10,7 @@ import numbers
 import os
 import pathlib
 import re
+import shutil
 import uuid
 import warnings
 from abc import abstractmethod
@@ -209,9 +210,14 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
             a misspelt ``exploration_final_esp`` would be ignored)
         :raise ValueError: for an invalid value, or one that changes the networks (in ``kwargs`` or ``custom_objects``)
         """
-        defaults = inspect.signature(cls.__init__).parameters
+        defaults = cls._constructor_parameters()
         arguments = [name for name in defaults if name not in ("self", "policy", "env", "_init_setup_model")]
         for key in kwargs:
+            if key == "policy":
+                raise TypeError(
+                    f"{cls.__name__}.load() got policy={kwargs[key]!r}: a loaded model keeps its saved policy class "
+                    "(its weights are of those networks); to train another policy, construct a new model"
+                )
             if key not in arguments:
                 close = difflib.get_close_matches(key, arguments, n=1)
                 raise TypeError(
@@ -248,6 +254,25 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         finally:
             LOADING.reset(token)
 
+    @classmethod
+    def _constructor_parameters(cls) -> dict[str, inspect.Parameter]:
+        """
+        :return: the constructor's parameters by name, with those of the parents' constructors that a subclass's passes
+            on through ``**kwargs`` (``def __init__(self, *args, bonus=0.0, **kwargs)``), the subclass's first
+        """
+        parameters: dict[str, inspect.Parameter] = {}
+        for klass in cls.__mro__:
+            init = klass.__dict__.get("__init__")
+            if init is None:
+                continue
+            own = inspect.signature(init).parameters
+            for name, parameter in own.items():
+                if parameter.kind not in (parameter.VAR_POSITIONAL, parameter.VAR_KEYWORD):
+                    parameters.setdefault(name, parameter)
+            if not any(parameter.kind is parameter.VAR_KEYWORD for parameter in own.values()):
+                break
+        return parameters
+
     def save(
         self,
         path: str | pathlib.Path | io.BufferedIOBase,
@@ -258,25 +283,38 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
         SB3's ``save``, written to a temporary file beside the target and then renamed onto it (``os.replace``, atomic):
         a process killed while saving (a pre-empted job, a ``CheckpointCallback`` mid-write) leaves the earlier file
         whole, and a process loading it meanwhile reads the old or the new model, never a part (SB3 overwrites in
-        place). The target is SB3's: ``.zip`` is added to a path without a suffix, and missing folders are created.
+        place). A kill can leave the temporary file, ``.sb3_classic-<hex>.partial.zip``, beside the target. The target
+        is SB3's: ``.zip`` is added to a path without a suffix, and missing folders are created; an existing file keeps
+        its permission bits, a symbolic link is written through, and a read-only file is refused as SB3 refuses it.
+        Where no file can be created beside the target (a read-only folder), SB3 writes the file in place.
 
         :param path: where to save (a file-like object is written directly)
         :param exclude: names of the attributes not to save, beside the default ones
         :param include: names of the attributes to save although excluded by default
+        :raises PermissionError: if the target exists and is not writable
         """
-        if not isinstance(path, (str, os.PathLike)):
-            super().save(path, exclude, include)
+        target = pathlib.Path(path) if isinstance(path, (str, os.PathLike)) else None
+        if target is None or not target.name or target.is_dir():
+            super().save(path, exclude, include)  # (a file object; SB3's own handling of "" and of a folder)
             return
-        target = pathlib.Path(path)
         if target.suffix == "":
             target = target.with_name(f"{target.name}.zip")
-        if target.is_dir():
-            super().save(path, exclude, include)  # (SB3 saves beside the folder, with a warning)
+        target = pathlib.Path(os.path.realpath(target))  # (through a symbolic link, as SB3's open() writes)
+        if target.exists() and not os.access(target, os.W_OK):
+            raise PermissionError(f"{target} is not writable: {type(self).__name__}.save keeps it (SB3 would not open it)")
+        if not target.parent.exists():
+            warnings.warn(f"Path '{target.parent}' does not exist. Will create it.", stacklevel=2)  # (SB3's warning)
+            target.parent.mkdir(parents=True, exist_ok=True)
+        temporary = target.with_name(f".sb3_classic-{uuid.uuid4().hex[:12]}.partial.zip")
+        try:
+            temporary.touch()
+        except OSError:
+            super().save(target, exclude, include)  # no file can be made here: SB3's write in place
             return
-        target.parent.mkdir(parents=True, exist_ok=True)
-        temporary = target.with_name(f".{target.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.partial.zip")
         try:
             super().save(temporary, exclude, include)
+            if target.exists():
+                shutil.copymode(target, temporary)
             os.replace(temporary, target)
         finally:
             temporary.unlink(missing_ok=True)
@@ -305,14 +343,16 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
             for name in names:
                 optimizer = recursive_getattr(self, name)
                 if isinstance(optimizer, th.optim.Optimizer):
-                    # (a key the optimizer's class has added since a file was saved gets its default on loading)
-                    needed = set().union(*before[name]["param_groups"]) - {"params"}
-                    missing = sorted(needed - set().union(*optimizer.param_groups))
-                    if missing:
+                    # Another class's state lacks some of this class's hyperparameters and has some of its own; one of
+                    # the same class only lacks those added since it was saved, or has some added since (a scheduler's
+                    # initial_lr, a newer torch's)
+                    given = set().union(*optimizer.param_groups) - {"params", "initial_lr"}
+                    missing, foreign = sorted(set(optimizer.defaults) - given), sorted(given - set(optimizer.defaults))
+                    if missing and foreign:
                         raise ValueError(
                             f"set_parameters: the state given for {name} ({type(optimizer).__name__}) is of another "
-                            f"optimizer: it lacks the hyperparameters {', '.join(missing)}. Pass the state of the same "
-                            "optimizer class, or leave that entry out with exact_match=False"
+                            f"optimizer: it lacks the hyperparameters {', '.join(missing)} and has {', '.join(foreign)}. "
+                            "Pass the state of the same optimizer class, or leave that entry out with exact_match=False"
                         )
         except BaseException:
             for name, state in before.items():

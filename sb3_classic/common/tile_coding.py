@@ -199,8 +199,9 @@ def _coordinates(
     """
     # (shape[0], not len(): torch.jit.trace records it as the batch size of each call, not a constant)
     x = th.clamp(observations.reshape(observations.shape[0], -1).to(th.float64), low, high)
-    # (not while tracing or exporting, which record no data-dependent branch: the NaN check is an eager one)
-    if not _tracing() and th.isnan(x).any():
+    # (not while tracing or exporting, which record no data-dependent branch: the NaN check is an eager one; torch.compile
+    # runs it at a graph break)
+    if not (th.jit.is_tracing() or th.compiler.is_exporting()) and th.isnan(x).any():
         raise ValueError(_nan_message(x.cpu().numpy()))
     # Position in tile widths from the origin (§9.5.4: tiles of width (high − low) / tiles_per_dim)
     scaled = tiles_per_dim * (x - origin) / (high - low)

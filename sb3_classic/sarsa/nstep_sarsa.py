@@ -875,8 +875,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         :param q_predicted: q̂(S_t, A_t) of its transitions before its first gradient step
         :param targets: their targets G_{t:t+n}
         """
-        if len(targets) == 1:
-            # The per-step mode's one transition, at every env step: three .item() cost a quarter of the cat below
+        if len(targets) == 1 and targets.device.type == "cpu":
+            # The per-step mode's one transition, at every env step: three .item() cost a quarter of the cat below (on
+            # the CPU; on a GPU each would wait for the device)
             self._record_values(loss.item(), [q_predicted.item()], [targets.item()])
             return
         # One conversion to Python floats and the means there: each .item() or .mean() costs as much as a small tensor
