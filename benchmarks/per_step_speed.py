@@ -130,13 +130,30 @@ COMPARISONS = (
 )
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--steps", type=positive_int, default=10_000, help="env steps per timed run (default 10,000)")
-    parser.add_argument("--repeats", type=positive_int, default=3, help="timed runs of each (default 3)")
-    parser.add_argument("--output", type=Path, default=RESULTS)
+def timing_arguments(
+    argv: list[str] | None, description: str | None, steps: int, repeats: int, output: Path
+) -> argparse.Namespace:
+    """
+    The command line of a timing comparison (``--steps``, ``--repeats``, ``--output``), parsed; torch set to 1 thread.
+
+    :param argv: the arguments (None: ``sys.argv``)
+    :param description: the command's help text
+    :param steps: the default env steps per timed run
+    :param repeats: the default timed runs of each
+    :param output: the default markdown file written
+    :return: the parsed arguments
+    """
+    parser = argparse.ArgumentParser(description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--steps", type=positive_int, default=steps, help=f"env steps per timed run (default {steps:,})")
+    parser.add_argument("--repeats", type=positive_int, default=repeats, help=f"timed runs of each (default {repeats})")
+    parser.add_argument("--output", type=Path, default=output)
     args = parser.parse_args(argv)
     th.set_num_threads(1)
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = timing_arguments(argv, __doc__, steps=10_000, repeats=3, output=RESULTS)
     load_before = os.getloadavg()[0]
     rows = []
     for name, package, loop, loop_name, target in COMPARISONS:

@@ -12,7 +12,6 @@ bookkeeping cheaper could gain. Every run is timed from scratch, the package's a
 order alternating, as in ``per_step_speed``.
 """
 
-import argparse
 import collections
 import contextlib
 import os
@@ -27,10 +26,9 @@ from typing import Any
 import torch as th
 from stable_baselines3.common.logger import Logger
 
-from benchmarks.per_step_speed import package_mlp_sarsa, torch_mlp_sarsa
+from benchmarks.per_step_speed import package_mlp_sarsa, timing_arguments, torch_mlp_sarsa
 from sb3_classic import NStepSARSA
 from sb3_classic.common.buffers import TrajectoryBuffer
-from sb3_classic.harness.common import positive_int
 
 RESULTS = Path(__file__).resolve().parent / "results" / "per-step-overhead.md"
 
@@ -93,12 +91,7 @@ def timing_torch_calls(totals: dict[str, float]) -> contextlib.AbstractContextMa
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--steps", type=positive_int, default=8_000, help="env steps per timed run (default 8,000)")
-    parser.add_argument("--repeats", type=positive_int, default=5, help="timed runs of each (default 5)")
-    parser.add_argument("--output", type=Path, default=RESULTS)
-    args = parser.parse_args(argv)
-    th.set_num_threads(1)
+    args = timing_arguments(argv, __doc__, steps=8_000, repeats=5, output=RESULTS)
     load_before = os.getloadavg()[0]
     package_mlp_sarsa(500, 0), torch_mlp_sarsa(500, 0)  # warm-up
     rows = []
