@@ -179,7 +179,7 @@ def _nan_message(x: np.ndarray) -> str:
 
 
 def _tracing() -> bool:
-    """:return: whether ``torch.jit.trace``, ``torch.compile`` or ``torch.export`` is tracing the call (an export)"""
+    """:return: whether ``torch.jit.trace``, ``torch.compile`` or ``torch.export`` traces the call (they do not see NumPy)"""
     return th.jit.is_tracing() or th.compiler.is_compiling()
 
 
