@@ -13,7 +13,8 @@ What ``register()`` changes in rl-zoo3, and nothing else:
 - ``rl_zoo3.hyperparams_opt.HYPERPARAMS_SAMPLER`` and ``HYPERPARAMS_CONVERTER`` gain their Optuna search spaces
   (``-optimize``) and the conversion of a stored trial back into constructor arguments (``--trial-id``);
 - ``ExperimentManager.__init__`` defaults ``config`` to this package's YAML for these two algorithms (``-conf``
-  still wins);
+  still wins), and, for them, sets PyTorch to one thread on the CPU unless the user chose a number
+  (``--num-threads N`` or ``OMP_NUM_THREADS``): see ``one_thread_unless_chosen``;
 - ``ExperimentManager._preprocess_schedules`` also reads ``value_learning_rate`` (REINFORCE's second learning rate)
   as the zoo reads ``learning_rate``: ``lin_0.01`` for a linear schedule;
 - the names a YAML's ``policy_kwargs`` string may use (the zoo evaluates it in ``rl_zoo3.exp_manager``'s namespace,
@@ -24,11 +25,14 @@ What ``register()`` changes in rl-zoo3, and nothing else:
 import functools
 import importlib
 import inspect
+import os
 from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
+import torch as th
+from stable_baselines3.common.utils import get_device
 from torch import nn
 
 from sb3_classic.common.tile_coding import TileCoding
@@ -300,8 +304,31 @@ def _zoo_targets() -> tuple[dict[str, Any], dict[str, Any], dict[str, Any], type
     return algos, samplers, converters, manager, [vars(exp_manager), vars(utils)]
 
 
-def _patch_default_config(manager: type) -> None:
-    """Make ``ExperimentManager`` read this package's YAML for its algorithms when no ``config`` (``-conf``) is given."""
+def one_thread_unless_chosen(num_threads: int, device: th.device | str, verbose: int = 1) -> bool:
+    """
+    One PyTorch thread for a zoo run on the CPU, unless the user chose a number. The networks of these algorithms
+    are small (two layers of 64 to 256 units, a batch of one to a few hundred rows) and they take a gradient step
+    every few env steps: PyTorch's intra-op threads cost more to wake than they save, and on a machine with other
+    work running each of those steps waits for a busy core. ``benchmarks/results/threads.md`` has the measurement.
+
+    :param num_threads: the zoo's ``--num-threads`` (``-1``, its default: not chosen)
+    :param device: the zoo's ``--device``
+    :param verbose: print what was set (0: nothing)
+    :return: whether it set one thread
+    """
+    if num_threads > 0 or "OMP_NUM_THREADS" in os.environ or get_device(device).type != "cpu":
+        return False
+    th.set_num_threads(1)
+    if verbose > 0:
+        print("sb3_classic: one PyTorch thread on the CPU (faster for these small networks); --num-threads N for another")
+    return True
+
+
+def _patch_experiment_manager(manager: type) -> None:
+    """
+    Make ``ExperimentManager`` read this package's YAML for its algorithms when no ``config`` (``-conf``) is given,
+    and train them with one PyTorch thread on the CPU unless a number was chosen (``one_thread_unless_chosen``).
+    """
     original_init = manager.__init__  # type: ignore[misc]
     if getattr(original_init, _PATCHED, False):
         return
@@ -311,8 +338,15 @@ def _patch_default_config(manager: type) -> None:
     def __init__(*args: Any, **kwargs: Any) -> None:
         bound = signature.bind(*args, **kwargs)
         algo = bound.arguments.get("algo")
-        if bound.arguments.get("config") is None and algo in ALGORITHMS:
-            bound.arguments["config"] = str(hyperparams_path(algo))
+        if algo in ALGORITHMS:
+            if bound.arguments.get("config") is None:
+                bound.arguments["config"] = str(hyperparams_path(algo))
+            zoo_args = bound.arguments.get("args")
+            one_thread_unless_chosen(
+                getattr(zoo_args, "num_threads", -1),
+                bound.arguments.get("device", "auto"),
+                bound.arguments.get("verbose", 1),
+            )
         original_init(*bound.args, **bound.kwargs)
 
     setattr(__init__, _PATCHED, True)
@@ -365,5 +399,5 @@ def register() -> None:
     algos.update(ALGORITHMS)
     samplers.update(SAMPLERS)
     converters.update(CONVERTERS)
-    _patch_default_config(manager)
+    _patch_experiment_manager(manager)
     _patch_value_learning_rate(manager)

@@ -7,7 +7,6 @@ import hashlib
 import inspect
 import io
 import json
-import os
 import re
 import shlex
 import shutil
@@ -15,8 +14,8 @@ import signal
 import subprocess
 import sys
 import threading
-import time
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -681,19 +680,39 @@ def test_sigterm_stops_the_runs_as_ctrl_c_does(tmp_path: Path, monkeypatch: pyte
     if threading.current_thread() is not threading.main_thread():
         pytest.skip("Python runs signal handlers in the main thread only")
     spec = RunSpec("reinforce", "CartPole-v1", 0, 1000, 500, 2, "policy: MlpPolicy\n", label="a seed 0")
-    before = signal.getsignal(signal.SIGTERM)
     for sent, status, message in ((signal.SIGTERM, 143, "Terminated (SIGTERM)"), (signal.SIGINT, 130, "Interrupted")):
 
         def run_pending(specs: list[RunSpec], *args: object, signum: int = sent) -> list[RunSpec]:
-            os.kill(os.getpid(), signum)
-            time.sleep(5)  # (the handler interrupts this)
+            # To this thread, its Python handler run before raise_signal returns: nothing left to the timing of a
+            # process-wide os.kill and an interrupted sleep
+            signal.raise_signal(signum)
             raise AssertionError("the signal should have stopped the runs")
 
         monkeypatch.setattr(pool, "run_pending", run_pending)
         output = io.StringIO()
-        assert pool.run_missing_runs(1, [spec], 1, tmp_path, Console(file=output, width=200)) == status
+        with signals_as_a_command_starts():
+            before = signal.getsignal(signal.SIGTERM)
+            assert pool.run_missing_runs(1, [spec], 1, tmp_path, Console(file=output, width=200)) == status
+            assert signal.getsignal(signal.SIGTERM) is before
         assert f"{message}: the finished runs are cached; run the same command again to resume." in output.getvalue()
-        assert signal.getsignal(signal.SIGTERM) is before
+
+
+@contextlib.contextmanager
+def signals_as_a_command_starts() -> Iterator[None]:
+    """
+    SIGINT and SIGTERM as in the main thread of a command Python starts (Ctrl-C raises KeyboardInterrupt, SIGTERM has
+    its default action, neither blocked), whatever the test process's libraries did to them; restored afterwards.
+    """
+    handlers = {signum: signal.getsignal(signum) for signum in (signal.SIGINT, signal.SIGTERM)}
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    blocked = signal.pthread_sigmask(signal.SIG_UNBLOCK, handlers)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+        for signum, handler in handlers.items():
+            signal.signal(signum, handler if handler is not None else signal.SIG_DFL)
 
 
 def fake_cache(tmp_path: Path, text: str = TINY) -> tuple[Path, Path, Path]:

@@ -39,6 +39,7 @@ from sb3_classic.zoo import (
     YAML_NAMES,
     ZooCompatibilityError,
     hyperparams_path,
+    one_thread_unless_chosen,
     register,
 )
 
@@ -430,6 +431,98 @@ def test_train_with_the_package_yaml(tmp_path: Path, algo: str, env_id: str, con
         epsilon = second.exploration_initial_eps * second.exploration_decay_rate**episodes
         assert second.exploration_rate == pytest.approx(max(second.exploration_final_eps, epsilon))
         assert second.exploration_rate < first.exploration_rate
+
+
+SHAPING_CALLBACK = """
+import copy
+import json
+import pickle
+
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
+
+
+class ShapeAndCopy(BaseCallback):
+    \"\"\"Sets every reward to 0.25 in place and copies the policy at every step; says what the buffer stored.\"\"\"
+
+    def __init__(self):
+        super().__init__()
+        self.stored = set()
+        self.copies = 0
+
+    def _on_step(self):
+        self.locals["rewards"][:] = 0.25
+        pickle.loads(pickle.dumps(copy.deepcopy(self.model.policy)))
+        self.copies += 1
+        return True
+
+    def _on_rollout_end(self):
+        buffer = self.model.rollout_buffer
+        self.stored.update(np.unique(buffer.rewards[: buffer.pos]).tolist())
+
+    def _on_training_end(self):
+        copy.deepcopy(self.model.policy)
+        with open("callback.json", "w") as file:
+            json.dump({"stored": sorted(self.stored), "copies": self.copies}, file)
+"""
+SMALL_ENTRIES: dict[str, dict[str, object]] = {
+    "reinforce": {"policy": "MlpPolicy", "policy_kwargs": "dict(net_arch=[8])"},
+    "nstep_sarsa": {"policy": "MlpPolicy", "policy_kwargs": "dict(net_arch=[8])", "n_steps": 2, "train_freq": 8},
+}
+
+
+@pytest.mark.parametrize("algo", ALGOS)
+def test_a_callback_of_the_yaml_shapes_rewards_and_copies_the_policy(tmp_path: Path, algo: str) -> None:
+    # rl-zoo3's `callback:` key, a class of the user's module (python -m puts the working directory on the path)
+    (tmp_path / "shaping.py").write_text(SHAPING_CALLBACK)
+    conf = tmp_path / "mine.yml"
+    entry = {**SMALL_ENTRIES[algo], "n_timesteps": 1000, "callback": "shaping.ShapeAndCopy"}
+    conf.write_text(yaml.safe_dump({"CartPole-v1": entry}))
+    train(tmp_path, algo, "CartPole-v1", "-conf", str(conf))
+    # As A2C's buffer holds them: the callback's rewards, not the env's 1.0
+    seen = json.loads((tmp_path / "callback.json").read_text())
+    assert seen["stored"] == [0.25]
+    assert seen["copies"] >= 1000
+
+
+def test_zoo_trains_with_one_thread_unless_a_number_is_chosen(tmp_path: Path) -> None:
+    # The zoo's train without --num-threads: one PyTorch thread (the tests' other commands set OMP_NUM_THREADS=1)
+    report = "import torch, atexit; atexit.register(lambda: print('threads:', torch.get_num_threads()))"
+    (tmp_path / "sitecustomize.py").write_text(report + "\n")
+    env = {key: value for key, value in ENV.items() if key != "OMP_NUM_THREADS"}
+    env["PYTHONPATH"] = str(tmp_path)
+    common = ["--algo", "reinforce", "--env", "CartPole-v1", "-n", "200", "--eval-freq", "-1", "--seed", "0"]
+
+    def threads(*args: str) -> tuple[int, str]:
+        result = subprocess.run(
+            [sys.executable, "-m", "rl_zoo3.train", *common, *args], cwd=tmp_path, env=env, capture_output=True, text=True
+        )
+        assert result.returncode == 0, result.stderr[-4000:]
+        (count,) = re.findall(r"^threads: (\d+)$", result.stdout, flags=re.MULTILINE)
+        return int(count), result.stdout
+
+    count, stdout = threads()
+    assert count == 1
+    assert "sb3_classic: one PyTorch thread on the CPU" in stdout
+    count, stdout = threads("--num-threads", "2")
+    assert count == 2
+    assert "sb3_classic: one PyTorch thread" not in stdout
+
+
+def test_one_thread_unless_chosen(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    before = th.get_num_threads()
+    try:
+        th.set_num_threads(2)
+        assert one_thread_unless_chosen(-1, "cpu", verbose=0)
+        assert th.get_num_threads() == 1
+        th.set_num_threads(2)
+        assert not one_thread_unless_chosen(2, "auto" if not th.cuda.is_available() else "cpu", verbose=0)
+        monkeypatch.setenv("OMP_NUM_THREADS", "2")
+        assert not one_thread_unless_chosen(-1, "cpu", verbose=0)
+        assert th.get_num_threads() == 2
+    finally:
+        th.set_num_threads(before)
 
 
 def test_rl_zoo3_console_script(tmp_path: Path) -> None:

@@ -38,7 +38,7 @@ SelfClassicOnPolicyAlgorithm = TypeVar("SelfClassicOnPolicyAlgorithm", bound="Cl
 #: The advice of a non-finite value's error, for the values ``step()`` returns
 FIND_NON_FINITE = (
     "To find where the value comes from, wrap the env in stable_baselines3.common.vec_env.VecCheckNan(env, "
-    "raise_exception=True)."
+    "raise_exception=True); if the env's values are finite, a callback changed them in place in its _on_step."
 )
 #: True while ``load()`` builds a model (its checks then accept a learning rate of 0)
 LOADING: contextvars.ContextVar[bool] = contextvars.ContextVar("sb3_classic_loading", default=False)
@@ -751,18 +751,23 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
             new_obs, rewards, dones, infos = env.step(env_actions)
             # A VecEnv of the user's may return 0/1 integers or floats: as an index, [1, 0] would select envs 1 and 0
             dones = np.asarray(dones, dtype=bool)
+            self.num_timesteps += env.num_envs
+            n_steps += 1
+
+            # The callback runs before the step is stored, as in SB3's loops: one that changes rewards (or
+            # observations) in place in _on_step, to shape or rescale them, changes what is trained on
+            callback.update_locals(locals())
+            continue_training = callback.on_step()
+
             # Nothing is stored or trained on if a value is NaN or ±inf: the model stays as its last update left it.
-            # Two np.isfinite calls, about 2 µs per step of all envs (~1% of the loop); final observations are
-            # checked in _episode_ends
+            # Checked after the callback, on the values that would be stored; final observations in _episode_ends
             if not (np.isfinite(rewards).all() and all_finite(new_obs)):  # type: ignore[arg-type]
                 if not np.isfinite(rewards).all():
                     self._raise_non_finite(rewards, "reward")
                 self._raise_non_finite(new_obs, "observation", after_reset=dones)  # type: ignore[arg-type]
-            self.num_timesteps += env.num_envs
-            n_steps += 1
-
             ends, truncated, final_observations = self._episode_ends(new_obs, dones, infos)  # type: ignore[arg-type]
-            # Stored before the callback, so that a callback stopping training leaves the buffer consistent
+            # Stored even when the callback stops training, so that the buffer and the envs stay in step: the next
+            # learn() goes on from the step the envs are at
             rollout_buffer.add(self._last_obs, actions, rewards, ends, truncated, final_observations)  # type: ignore[arg-type]
             self._last_obs = new_obs  # type: ignore[assignment]
             # The training episodes' starts: an episode cut at max_episode_length starts a new one where the env goes on
@@ -772,10 +777,7 @@ class ClassicOnPolicyAlgorithm(OnPolicyAlgorithm):
             if ends.any():
                 n_episodes += int(ends.sum())
                 self._on_episodes_end(int(ends.sum()))
-
-            # Give access to local variables
-            callback.update_locals(locals())
-            if not callback.on_step():
+            if not continue_training:
                 return False
 
         callback.update_locals(locals())

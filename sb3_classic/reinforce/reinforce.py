@@ -287,6 +287,9 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         self._clip_gradients(self.policy.value_parameters)
         for optimizer in optimizers:
             optimizer.step()
+        # The distribution evaluated here holds this step's graph: dropped, so that the graph is freed and the policy
+        # can be copied (copy.deepcopy, pickle) by a callback, as A2C's can during its rollouts
+        self.policy.action_dist.distribution = None  # type: ignore[assignment]
         return dict(
             policy_loss=policy_loss.detach(),
             value_loss=value_loss.detach(),
