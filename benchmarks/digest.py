@@ -31,6 +31,7 @@ from stable_baselines3.common.logger import KVWriter, Logger
 
 import sb3_classic.envs  # noqa: F401  (registers the book's envs)
 from sb3_classic import REINFORCE, NStepSARSA, TileCoding
+from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
 
 SMALL_NET = dict(net_arch=[64, 64])
 
@@ -78,18 +79,18 @@ def _flatten(prefix: str, value: Any) -> list[tuple[str, Any]]:
     return [(prefix, value)]
 
 
-def _sarsa(env_id: str, n_envs: int, steps: int, **kwargs: Any) -> tuple[BaseAlgorithm, int]:
+def _sarsa(env_id: str, n_envs: int, steps: int, **kwargs: Any) -> tuple[ClassicOnPolicyAlgorithm, int]:
     env = make_vec_env(env_id, n_envs=n_envs, seed=0)
     return NStepSARSA("MlpPolicy", env, seed=0, device="cpu", **kwargs), steps
 
 
-def _reinforce(n_envs: int, steps: int, **kwargs: Any) -> tuple[BaseAlgorithm, int]:
+def _reinforce(n_envs: int, steps: int, **kwargs: Any) -> tuple[ClassicOnPolicyAlgorithm, int]:
     env = make_vec_env("CartPole-v1", n_envs=n_envs, seed=0)
     return REINFORCE("MlpPolicy", env, seed=0, device="cpu", policy_kwargs=SMALL_NET, **kwargs), steps
 
 
 #: The configurations, each a model to train and its env steps: every update path of both algorithms
-CONFIGURATIONS: dict[str, Callable[[], tuple[BaseAlgorithm, int]]] = {
+CONFIGURATIONS: dict[str, Callable[[], tuple[ClassicOnPolicyAlgorithm, int]]] = {
     # Batched SARSA as on Acrobot: 8 envs, Expected SARSA's λ-returns, a bootstrap network and weight averaging
     "sarsa-batch-lambda-bootstrap-averaging": lambda: _sarsa(
         "Acrobot-v1",
