@@ -1,4 +1,8 @@
-"""The policies' speed paths: fused Adam by default, and REINFORCE's sampler of the rollout loop."""
+"""
+The policies' speed paths (fused Adam by default, REINFORCE's sampler of the rollout loop) and policies of the user's:
+subclasses' distributions, ``forward``, ``make_q_net`` and ``predict``, features extractors, and layers of their own in
+eval mode for ``predict``.
+"""
 
 from operator import attrgetter
 from typing import Any
@@ -7,11 +11,13 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
+from recorders import RecordLocal
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.distributions import Distribution
 from stable_baselines3.common.envs import IdentityEnvBox, SimpleMultiObsEnv
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from stable_baselines3.dqn.policies import QNetwork
+from torch import nn
 
 from sb3_classic import REINFORCE, NStepSARSA
 from sb3_classic.common.torch_layers import optimizer_kwargs_with_defaults
@@ -254,3 +260,58 @@ def test_sarsa_behaviour_policy_is_greedy_in_a_subclass_predict() -> None:
     taken = actions_taken(model, 300)
     assert len(taken) >= 300
     assert set(taken) == {1}
+
+
+class NoisyLinear(nn.Linear):
+    """A NoisyNet-like output layer: noisy weights in train mode only (it reads ``self.training``)."""
+
+    def forward(self, x: th.Tensor) -> th.Tensor:
+        weight = self.weight + 0.5 * th.randn_like(self.weight) if self.training else self.weight
+        return nn.functional.linear(x, weight, self.bias)
+
+
+class NoisySARSAPolicy(SARSAPolicy):
+    def make_q_net(self) -> QNetwork:
+        q_net = super().make_q_net()
+        output = q_net.q_net[-1]
+        assert isinstance(output, nn.Linear)
+        q_net.q_net[-1] = NoisyLinear(output.in_features, output.out_features)
+        return q_net
+
+
+def test_a_layer_of_the_users_is_put_in_eval_mode_for_predict() -> None:
+    # set_training_mode only flipped the policy's and q_net's flags where no dropout or batch norm was found: the
+    # NoisyNet layer stayed in train mode, and predict(deterministic=True) was random (DQN's is not)
+    model = NStepSARSA(NoisySARSAPolicy, "CartPole-v1", seed=0, device="cpu")
+    model.learn(100)
+    obs = np.array([0.01, 0.0, 0.01, 0.0], dtype=np.float32)
+    assert len({int(model.predict(obs, deterministic=True)[0]) for _ in range(30)}) == 1
+    assert not model.policy.q_net.q_net[-1].training
+    model.policy.set_training_mode(True)
+    assert model.policy.q_net.q_net[-1].training
+    # SB3's plain layers keep the shortcut; RReLU's slopes are random in train mode
+    assert not NStepSARSA("MlpPolicy", "CartPole-v1", device="cpu").policy.mode_dependent
+    rrelu = NStepSARSA("MlpPolicy", "CartPole-v1", policy_kwargs=dict(activation_fn=nn.RReLU), device="cpu")
+    assert rrelu.policy.mode_dependent
+
+
+def test_make_q_net_must_return_a_qnetwork() -> None:
+    class Plain(SARSAPolicy):
+        def make_q_net(self) -> Any:
+            return nn.Sequential(nn.Linear(4, 2))
+
+    # (AttributeError: 'Sequential' object has no attribute 'features_extractor')
+    with pytest.raises(TypeError, match="make_q_net returned a Sequential: Plain needs an SB3 QNetwork"):
+        NStepSARSA(Plain, "CartPole-v1", device="cpu")
+
+
+def test_reinforce_acts_with_a_subclass_forward() -> None:
+    # A2C's rollouts act with policy(obs)'s actions; REINFORCE drew from the distribution, ignoring the override
+    class AlwaysOne(REINFORCEPolicy):
+        def forward(self, obs: th.Tensor, deterministic: bool = False) -> tuple[th.Tensor, th.Tensor, th.Tensor]:
+            actions, values, log_prob = super().forward(obs, deterministic)
+            return th.ones_like(actions), values, log_prob
+
+    actions = RecordLocal("actions")
+    REINFORCE(AlwaysOne, "CartPole-v1", seed=0, device="cpu").learn(300, callback=actions)
+    assert set(np.concatenate(actions.values).tolist()) == {1}

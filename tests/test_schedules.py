@@ -1,9 +1,21 @@
-"""Learning-rate decays and ε schedules: as pure functions, inside training, and across learn() calls and save/load."""
+"""
+Learning-rate decays and ε schedules: as pure functions, inside training, and across learn() calls and save/load;
+callables, SB3's schedules, the zoo's ``lin_`` entries and an ε schedule of the user's stay in their range when the last
+rollout ends past ``total_timesteps``.
+"""
 
 from pathlib import Path
+from typing import Any
 
 import pytest
-from stable_baselines3.common.utils import LinearSchedule
+import torch as th
+from recorders import RecordAttribute
+from rl_zoo3.exp_manager import ExperimentManager
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.utils import FloatSchedule, LinearSchedule
+from test_contract import MODEL_LIST, make_model
 
 from sb3_classic import REINFORCE, NStepSARSA
 from sb3_classic.common.schedules import ExponentialDecay, StepDecay
@@ -24,9 +36,13 @@ def test_exponential_decay() -> None:
     assert decay(10_000) == 0.05
 
 
+def optimizers(model: Any) -> list[th.optim.Optimizer]:
+    """:return: the policy's optimizer, and REINFORCE's of the baseline"""
+    return [model.policy.optimizer] + ([model.policy.value_optimizer] if isinstance(model, REINFORCE) else [])
+
+
 def optimizer_lrs(model: REINFORCE | NStepSARSA) -> list[float]:
-    optimizers = [model.policy.optimizer, getattr(model.policy, "value_optimizer", None)]
-    return [optimizer.param_groups[0]["lr"] for optimizer in optimizers if optimizer is not None]
+    return [optimizer.param_groups[0]["lr"] for optimizer in optimizers(model)]
 
 
 def test_reinforce_learning_rates_are_separate_and_decay_per_episode() -> None:
@@ -162,3 +178,101 @@ def test_sarsa_per_step_decay_counts_the_episodes_before_each_step() -> None:
     # The step that ended the first episode trained with the undecayed rate
     first_end = next(index for index, (episodes_before, _) in enumerate(used) if episodes_before == 1) - 1
     assert used[first_end] == (0, 1.0)
+
+
+def record_learning_rates(optimizer: th.optim.Optimizer) -> list[float]:
+    """:return: a list that gets the learning rate of every later ``optimizer.step()``"""
+    seen: list[float] = []
+    optimizer.register_step_pre_hook(lambda opt, args, kwargs: seen.append(opt.param_groups[0]["lr"]))
+    return seen
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_a_callable_learning_rate_never_goes_negative(model_class: type[BaseAlgorithm]) -> None:
+    """The last rollout ends past ``total_timesteps``, where ``3e-3 * progress`` is negative."""
+    schedule = lambda progress: 3e-3 * progress  # noqa: E731 (a schedule as users write it)
+    extra = dict(value_learning_rate=schedule) if model_class is REINFORCE else {}
+    model = make_model(model_class, seed=0, learning_rate=schedule, **extra)
+    seen = [record_learning_rates(optimizer) for optimizer in optimizers(model)]
+    model.learn(1234)
+    assert model.num_timesteps > 1234, "the overshoot this test is about did not happen"
+    for rates in seen:
+        assert rates, "no update"
+        assert min(rates) >= 0.0, f"negative learning rate {min(rates)}"
+        assert max(rates) <= 3e-3
+        # The last update is past the end: the schedule's value at progress 0, not below it
+        assert rates[-1] == pytest.approx(0.0, abs=1e-12) or rates[-1] > 0
+    assert model._current_progress_remaining == 0.0
+
+
+def test_the_packages_lin_entries_on_8_envs() -> None:
+    """``lin_2e-3`` read by the zoo, 8 envs, train_freq 16: 1,000 steps is not a multiple of 128."""
+    schedule = ExperimentManager._preprocess_schedules({"learning_rate": "lin_2e-3"})["learning_rate"]
+    env = make_vec_env("CartPole-v1", n_envs=8, seed=0)
+    model = make_model(NStepSARSA, env, seed=0, learning_rate=schedule, train_freq=16)
+    seen = record_learning_rates(model.policy.optimizer)
+    model.learn(1000)
+    assert model.num_timesteps == 1024
+    assert min(seen) == 0.0  # the last update, past the end, at the schedule's end value
+    assert max(seen) <= 2e-3
+
+
+@pytest.mark.parametrize(
+    ("schedule", "low", "high"),
+    [
+        pytest.param(LinearSchedule(1e-3, 1e-4, 1.0), 1e-4, 1e-3, id="LinearSchedule"),
+        pytest.param(FloatSchedule(5e-4), 5e-4, 5e-4, id="FloatSchedule"),
+        pytest.param(5e-4, 5e-4, 5e-4, id="float"),
+    ],
+)
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_sb3_schedules_stay_in_their_range(model_class: type[BaseAlgorithm], schedule: Any, low: float, high: float) -> None:
+    extra = dict(value_learning_rate=schedule) if model_class is REINFORCE else {}
+    model = make_model(model_class, seed=0, learning_rate=schedule, **extra)
+    seen = [record_learning_rates(optimizer) for optimizer in optimizers(model)]
+    model.learn(777)
+    for rates in seen:
+        assert low - 1e-12 <= min(rates) <= max(rates) <= high + 1e-12
+
+
+def test_linear_epsilon_stays_in_its_range() -> None:
+    class RecordEpsilon(BaseCallback):
+        def __init__(self) -> None:
+            super().__init__()
+            self.values: list[float] = []
+
+        def _on_step(self) -> bool:
+            self.values.append(self.model.exploration_rate)  # type: ignore[attr-defined]
+            return True
+
+    callback = RecordEpsilon()
+    env = make_vec_env("CartPole-v1", n_envs=8, seed=0)
+    model = make_model(NStepSARSA, env, seed=0, exploration_schedule="linear", exploration_fraction=1.0, train_freq=16)
+    # A schedule of the progress without a clamp of its own (SB3's LinearSchedule has one)
+    model.exploration_schedule_fn = lambda progress: 1.0 - 0.9 * (1.0 - progress)
+    model.learn(1000, callback=callback)
+    assert min(callback.values) >= 0.1 - 1e-12
+    assert model.exploration_rate == pytest.approx(0.1)
+
+
+def test_an_exploration_schedule_of_the_users(tmp_path: Path) -> None:
+    # SB3's DQN keeps its ε schedule as model.exploration_schedule: assigning one was ignored (ε went on decaying), and
+    # the saved file then failed to load ("exploration_schedule=LinearSchedule(...) must be one of ...")
+    model = NStepSARSA("MlpPolicy", "CartPole-v1", seed=0, device="cpu")
+    model.exploration_schedule = LinearSchedule(0.3, 0.3, 1.0)
+    model.learn(300)
+    assert model.exploration_rate == pytest.approx(0.3)
+    model.save(tmp_path / "model.zip")
+    assert NStepSARSA.load(tmp_path / "model.zip", device="cpu").exploration_rate == pytest.approx(0.3)
+    # ... or passed: ε follows the progress of each learn() call, as DQN's
+    decaying = NStepSARSA("MlpPolicy", "CartPole-v1", exploration_schedule=LinearSchedule(1.0, 0.0, 1.0), device="cpu")
+    rates = RecordAttribute("exploration_rate")
+    decaying.learn(400, callback=rates)
+    assert rates.values[0] > 0.9
+    assert rates.values[-1] < 0.1
+    with pytest.raises(ValueError, match=r"exploration_fraction=0.2 belongs to the 'linear' or 'exponential' ε schedule"):
+        NStepSARSA("MlpPolicy", "CartPole-v1", exploration_schedule=FloatSchedule(0.1), exploration_fraction=0.2)
+    with pytest.raises(ValueError, match=r"exploration_initial_eps=0.9 belongs to .* drop exploration_initial_eps"):
+        NStepSARSA("MlpPolicy", "CartPole-v1", exploration_schedule=FloatSchedule(0.1), exploration_initial_eps=0.9)
+    with pytest.raises(ValueError, match=r"gave ε = 2\.0 at progress remaining 1: ε is a probability"):
+        NStepSARSA("MlpPolicy", "CartPole-v1", exploration_schedule=FloatSchedule(2.0), device="cpu")
