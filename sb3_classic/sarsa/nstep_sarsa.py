@@ -1,6 +1,6 @@
 import math
 from collections.abc import Callable, Sequence
-from typing import Any, ClassVar, Literal, TypeVar
+from typing import Any, ClassVar, Literal, NamedTuple, TypeVar
 
 import numpy as np
 import torch as th
@@ -27,6 +27,24 @@ from sb3_classic.common.utils import check_bool, check_choice, check_positive_in
 from sb3_classic.sarsa.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, SARSAPolicy
 
 SelfNStepSARSA = TypeVar("SelfNStepSARSA", bound="NStepSARSA")
+
+
+class TileCodedQ(NamedTuple):
+    """A linear q̂ over tile features: its tile coder and its linear layer."""
+
+    extractor: TileCoding
+    layer: th.nn.Linear
+
+
+class RolloutQValues(NamedTuple):
+    """q̂(S, ·) of the states the rollout loop last chose actions in, and when it computed them."""
+
+    #: q̂(S, ·), shape (n_envs, n_actions)
+    q_values: np.ndarray
+    #: ``_n_updates`` then (an update since changes the weights)
+    n_updates: int
+    #: ``num_timesteps`` then (before the step taken in those states)
+    num_timesteps: int
 
 
 def _polyak_update(source: th.nn.Module, copy: th.nn.Module, tau: float, statistics: bool) -> None:
@@ -263,7 +281,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         # ε of the ε-greedy behaviour policy (SB3's DQN name); follows exploration_schedule
         self.exploration_rate = exploration_initial_eps
         # q̂(S, ·) of the rollout loop's last step, the update count and the env steps when it was computed
-        self._rollout_q_values: tuple[np.ndarray, int, int] = (np.zeros(0), -1, -1)
+        self._rollout_q_values = RolloutQValues(np.zeros(0), -1, -1)
         if _init_setup_model:
             self._setup_model()  # (which checks the arguments first)
 
@@ -465,7 +483,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             q_values = self.policy.q_net(obs_as_tensor(obs, self.device)).cpu().numpy()
         if self.update_mode == "per_step":
             # Kept for the bootstrap of the next update, if no update comes in between (see _next_state_values)
-            self._rollout_q_values = (q_values, self._n_updates, self.num_timesteps)
+            self._rollout_q_values = RolloutQValues(q_values, self._n_updates, self.num_timesteps)
         return self._epsilon_greedy(greedy_random_ties(q_values))
 
     def _rollout_complete(self, n_steps: int, n_episodes: int) -> bool:
@@ -524,8 +542,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         """
         ``_training_batch`` for the book's loop (one env, an update every step): the same batch to the last bit,
         without the whole-buffer arrays of the general case, which cost more than the gradient step's own overhead
-        when they run every env step (issue 12). One or a few windows per update, each computed alone
-        (``nstep_window``: the same bits as ``nstep_windows``, without its cost of n × the steps held).
+        when they run every env step. One or a few windows per update, each computed alone (``nstep_window``: the
+        same bits as ``nstep_windows``, without its cost of n × the steps held).
         """
         buffer = self.rollout_buffer
         start, pos = int(buffer.start[0]), buffer.pos
@@ -623,8 +641,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         last_step_q = self._last_step_q_values()
         if last_step_q is not None and (rows == buffer.pos - 1).all():
             # q̂(S, ·) of the last step's states, computed by the rollout loop with the same weights (no update since):
-            # with train_freq=1 this is every bootstrap of the per-step mode, which then needs one forward pass less
-            # (the batch mode always takes the pass below, so that its seeded runs repeat those of earlier versions)
+            # with train_freq=1 this is every bootstrap of the per-step mode, which then needs one forward pass less.
+            # The batch mode always takes the pass below: its bootstrap values are those of one forward pass over
+            # every stored step, the same bits whatever rows an update needs
             return self._sarsa_values(last_step_q[envs], buffer.actions[rows, envs])
         return self._stored_values()[rows, envs]
 
@@ -646,14 +665,14 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         :return: q̂(S, ·) of the last step's states, shape (n_envs, n_actions), as the rollout loop computed them
             (``update_mode="per_step"``, no bootstrap network), if no update has changed the weights since; else None
         """
-        q_values, n_updates, num_timesteps = self._rollout_q_values
+        last = self._rollout_q_values
         if (
             self.update_mode == "per_step"
             and self.policy.q_net_target is None
-            and n_updates == self._n_updates
-            and num_timesteps + self.n_envs == self.num_timesteps
+            and last.n_updates == self._n_updates
+            and last.num_timesteps + self.n_envs == self.num_timesteps
         ):
-            return q_values
+            return last.q_values
         return None
 
     def _sarsa_values(self, q_values: np.ndarray, actions: np.ndarray) -> np.ndarray:
@@ -724,9 +743,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         ``_gradient_step`` on one transition for a linear q̂(s, a, w) = W_a x(s) (+ b_a) and plain SGD: the update
         W_a ← W_a + α [G − q̂(S_t, A_t, w)] x(S_t) (S&B eq. 10.5 with ∇q̂ = x, §9.4), applied to the one row without
         autograd. The same arithmetic as autograd's gradient of ½(G − q̂)² and ``torch.optim.SGD``'s step, so the weights
-        are the same to the last bit (``tests/test_book_updates.py``) at a fraction of the cost: the per-step mode makes
-        this update at every env step (issue 12). Over ``TileCoding`` it is ``_tile_sgd_step``'s, over the active tiles,
-        whose weights agree with autograd's to float32 rounding.
+        are the same to the last bit, at a fraction of the cost: the per-step mode makes this update at every env step.
+        Over ``TileCoding`` it is ``_tile_sgd_step``'s, over the active tiles, whose weights agree with autograd's to
+        float32 rounding.
 
         :param layer: q̂'s linear layer (``_plain_sgd_linear_layer``)
         :param observations: S_t, a batch of one
@@ -735,7 +754,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         :return: q̂(S_t, A_t) before the step, shape (1,), and the loss ½(G − q̂)², both detached
         """
         action = int(actions[0, 0])
-        if self._tile_sgd is not None and self._tile_sgd[1] is layer:
+        if self._tile_sgd is not None and self._tile_sgd.layer is layer:
             q_value, loss = self._tile_sgd_step(*self._tile_sgd, observations.numpy(), action, targets.numpy()[0])  # type: ignore[union-attr]
             return th.tensor([q_value]), th.tensor([loss])
         learning_rate = float(self.policy.optimizer.param_groups[0]["lr"])
@@ -750,7 +769,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
                 layer.bias[action : action + 1].add_(error, alpha=-learning_rate)
         return q_predicted, 0.5 * error.square()
 
-    def _tile_coded_q(self) -> tuple[TileCoding, th.nn.Linear] | None:
+    def _tile_coded_q(self) -> TileCodedQ | None:
         """
         :return: q̂'s tile coder and layer if q̂ is linear over ``TileCoding`` features (``SARSAPolicy.linear_layer``)
             on the CPU: the book's linear methods on Mountain Car (Figs 10.1–10.4), whose q̂ the rollout computes and
@@ -767,7 +786,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             return None
         if self.policy.normalize_images and is_image_space(self.observation_space):
             return None
-        return extractor, layer
+        return TileCodedQ(extractor, layer)
 
     def _tile_q_values(self, extractor: TileCoding, layer: th.nn.Linear, observations: np.ndarray) -> np.ndarray:
         """
@@ -795,7 +814,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         ∇q̂ = x, §9.4) adds α[G − q̂] to the weight of each active tile i_t(S_t) (and to b_a), as the book's code for
         Mountain Car does; a hashed tile met by k tilings gets it k times, as its feature is k. The arithmetic of
         autograd's gradient and ``torch.optim.SGD``'s step in float32, with q̂ summed over the active tiles
-        (``_tile_q_values``): the weights agree with theirs to float32 rounding (``tests/test_book_updates.py``).
+        (``_tile_q_values``): the weights agree with theirs to float32 rounding.
 
         :param extractor: q̂'s tile coder
         :param layer: q̂'s linear layer
@@ -839,7 +858,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         for gradient_step in range(self.gradient_steps):
             for chunk in chunks:
                 if len(chunks) == 1:
-                    # The whole batch, not sliced (3 tensor slices: ~4 µs, which the per-step mode pays every env step)
+                    # The whole batch, not sliced: the per-step mode would pay three tensor slices at every env step
                     q_predicted, loss = self._gradient_step(batch.observations, batch.actions, batch.targets)
                 else:
                     observations = select(batch.observations, chunk)  # type: ignore[arg-type]
@@ -881,7 +900,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             self._record_values(loss.item(), [q_predicted.item()], [targets.item()])
             return
         # One conversion to Python floats and the means there: each .item() or .mean() costs as much as a small tensor
-        # op (2 µs instead of 7)
+        # op
         values = th.cat((loss.reshape(1), q_predicted, targets)).tolist()
         self._record_values(values[0], values[1 : 1 + len(q_predicted)], values[1 + len(q_predicted) :])
 
@@ -904,9 +923,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         The update of the book's loop (one env, ``train_freq=1``, ``gradient_steps=1``, ``update_mode="per_step"``, no
         bootstrap network: the box of S&B §10.2) between episode ends, where the one transition to train on is
         S_{t−n}'s: its window holds n rewards and bootstraps from q̂(S_t, ·), which the rollout has just computed
-        with the same weights. It is ``train()``'s update of that transition to the last bit (the weights, the log;
-        ``tests/test_book_updates.py``), without the general case's arrays over the buffer and its batch of one:
-        those cost about as much as the gradient step's own overhead when they run at every env step (issue 12).
+        with the same weights. It is ``train()``'s update of that transition to the last bit (the weights, the log),
+        without the general case's arrays over the buffer and its batch of one: those cost about as much as the
+        gradient step's own overhead when they run at every env step.
 
         :return: whether it made the update (False: ``train()`` goes on with the general case, e.g. at an episode's
             end, where several transitions complete together, or before n steps have been taken)
