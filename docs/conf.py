@@ -13,7 +13,7 @@ import sb3_classic  # noqa: E402
 
 project = "sb3_classic"
 author = "sb3_classic developers"
-copyright = "sb3_classic developers"  # noqa: A001
+copyright = "sb3_classic developers"
 version = release = sb3_classic.__version__
 
 extensions = [
@@ -59,7 +59,7 @@ DOCSTRING_ESCAPES = {
 }
 
 
-def escape_docstring_markup(app, what, name, obj, options, lines):  # noqa: ANN001, ANN201
+def escape_docstring_markup(app, what, name, obj, options, lines):
     """Escape the ``DOCSTRING_ESCAPES`` of a docstring (Sphinx's ``autodoc-process-docstring`` event)."""
     for i, line in enumerate(lines):
         for text, escaped in DOCSTRING_ESCAPES.items():
@@ -67,5 +67,5 @@ def escape_docstring_markup(app, what, name, obj, options, lines):  # noqa: ANN0
         lines[i] = line
 
 
-def setup(app):  # noqa: ANN001, ANN201
+def setup(app):
     app.connect("autodoc-process-docstring", escape_docstring_markup)

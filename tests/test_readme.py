@@ -3,6 +3,7 @@ the rest of the documentation is, have their own checks: tests/test_docs.py.)"""
 
 import re
 from pathlib import Path
+
 import pytest
 
 ROOT = Path(__file__).parents[1]
