@@ -70,7 +70,10 @@ def test_every_page_is_in_the_toctree() -> None:
     assert pages == listed
 
 
-@pytest.mark.parametrize(("page", "line", "code"), python_blocks(), ids=lambda value: str(value)[:40])
+EXAMPLES = [pytest.param(*block, id=f"{block[0]}:{block[1]}") for block in python_blocks()]
+
+
+@pytest.mark.parametrize(("page", "line", "code"), EXAMPLES)
 def test_python_example_runs(page: str, line: int, code: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # Each block as written, with a small budget: what is checked is that it runs (in a folder of its own: some save)
     monkeypatch.chdir(tmp_path)
