@@ -59,8 +59,9 @@ def test_the_docs_build_with_warnings_as_errors(tmp_path: Path) -> None:
     assert (tmp_path / "html" / "modules" / "nstep_sarsa.html").is_file()
     api = (tmp_path / "html" / "modules" / "reinforce.html").read_text()
     assert "value_learning_rate" in api, "the REINFORCE page has no API reference (autodoc)"
-    # The committed figures are part of the site
-    assert (tmp_path / "html" / "_images" / "Acrobot-v1-steps.png").is_file()
+    # The committed figures are part of the site (an sdist leaves them out: docs/conf.py builds without them there)
+    if (RESULTS / "Acrobot-v1-steps.png").exists():
+        assert (tmp_path / "html" / "_images" / "Acrobot-v1-steps.png").is_file()
 
 
 def test_every_page_is_in_the_toctree() -> None:
