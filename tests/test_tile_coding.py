@@ -383,7 +383,7 @@ def test_non_box_space_raises() -> None:
 
 
 def test_nstep_sarsa_on_mountain_car_with_tile_coding(tmp_path: Path) -> None:
-    # The README's usage: q̂(s, ·, w) linear in the 648 tile features of the book's Mountain Car
+    # The documented usage (docs/modules/tile_coding.md): q̂(s, ·, w) linear in the 648 tile features of the book's Mountain Car
     model = NStepSARSA(
         "MlpPolicy",
         "sb3_classic/MountainCarNoLimit-v0",
@@ -406,11 +406,11 @@ def test_nstep_sarsa_on_mountain_car_with_tile_coding(tmp_path: Path) -> None:
     np.testing.assert_array_equal(loaded.predict(observations, deterministic=True)[0], actions)
 
 
-def test_readme_tile_coding_example_runs() -> None:
-    readme = (ROOT / "README.md").read_text()
-    (example,) = re.findall(r"### Tile coding and the book's example envs\n.*?```python\n(.*?)```", readme, flags=re.DOTALL)
+def test_docs_tile_coding_example_runs() -> None:
+    page = (ROOT / "docs" / "modules" / "tile_coding.md").read_text()
+    (example,) = re.findall(r"## Example\n.*?```python\n(.*?)```", page, flags=re.DOTALL)
     namespace: dict[str, object] = {}
-    exec(compile(example, "README.md tile coding", "exec"), namespace)
+    exec(compile(example, "docs/modules/tile_coding.md", "exec"), namespace)
     model = namespace["model"]
     assert isinstance(model, NStepSARSA)
     assert isinstance(model.policy.q_net.features_extractor, TileCoding)
