@@ -1,8 +1,8 @@
 """
 How many PyTorch threads a zoo run of these algorithms should use on the CPU: the zoo's command line with PyTorch's
 default intra-op threads (``--num-threads`` set to that number) against the package's default (one thread, set by
-``sb3_classic.zoo.one_thread_unless_chosen``), on an idle machine and on one with other work running (one busy
-process per core, as a second training run or a build would be).
+``sb3_classic.zoo.one_thread_unless_chosen``), on the machine as it is and with other work added (one busy process
+per core, as a second training run or a build would be).
 
 Each row is the wall time of the whole command (start-up and evaluations included), as a user waits for it; the two
 commands run in turn, pair by pair, so that a drift of the machine's speed moves both. Then the README's main job
@@ -47,7 +47,7 @@ def load(processes: int) -> Iterator[None]:
     """
     Other work on the machine while the block runs: ``processes`` processes that keep a core busy each.
 
-    :param processes: how many (0: an idle machine)
+    :param processes: how many (0: none added)
     """
     workers = [multiprocessing.Process(target=_busy, daemon=True) for _ in range(processes)]
     for worker in workers:
@@ -106,17 +106,19 @@ def main(argv: Sequence[str] | None = None) -> None:
                 for name, arguments in commands.items():
                     times[name].append(zoo_seconds(arguments))
                     print(f"{busy} busy, {name}: {times[name][-1]:.1f} s", flush=True)
-        baseline = statistics.median(times[next(iter(commands))])
+        baseline_times = times[next(iter(commands))]
         for name, seconds in times.items():
             median = statistics.median(seconds)
+            # Pair by pair (the two commands ran one after the other): a drift of the machine's speed moves both
+            speed_up = statistics.median(before / after for before, after in zip(baseline_times, seconds, strict=True))
             rows.append(
                 {
-                    "Machine": "idle" if busy == 0 else f"{busy} busy processes",
+                    "Load added": "none" if busy == 0 else f"{busy} busy processes",
                     "Threads": name,
                     "Wall s (median)": f"{median:.1f}",
                     "min–max": f"{min(seconds):.1f}–{max(seconds):.1f}",
                     "Steps/s": f"{args.steps / median:,.0f}",
-                    "Speed-up": f"{baseline / median:.2f}×",
+                    "Speed-up": f"{speed_up:.2f}×",
                 }
             )
 
@@ -143,13 +145,13 @@ python -m benchmarks.threads
 
 The zoo's command `python -m rl_zoo3.train {shlex.join(probe)}` ({args.steps:,} env steps, no evaluations), timed
 whole (start-up included) {args.repeats} times in turn with each number of threads, on this machine ({cores} cores)
-idle and with {cores} processes that keep a core busy each. The networks are small (two layers of 64 to 256 units,
+as it was and with {cores} processes added that keep a core busy each. The networks are small (two layers of 64 to 256 units,
 a batch of one to a few hundred rows) and take a gradient step every few env steps: waking PyTorch's intra-op threads
 costs more than they save, and with the cores busy each step waits for the scheduler to run every thread. So a zoo
 run of these algorithms on the CPU uses one thread unless the user chose a number (`--num-threads N`, or
 `OMP_NUM_THREADS`), and prints so; the study runner's processes use one thread each.
 
-Speed-up: PyTorch's default divided by this row, in the same machine state.
+Speed-up: PyTorch's default's wall time divided by this row's, pair by pair (the median of the pairs).
 
 Versions: {", ".join(f"{name} {version}" for name, version in versions.items())}.
 
