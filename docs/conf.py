@@ -54,22 +54,3 @@ if not (ROOT / "benchmarks" / "results" / "Acrobot-v1-steps.png").exists():
 html_theme = "furo"
 html_title = f"sb3_classic {release}"
 html_static_path: list[str] = []
-
-# Docstrings whose plain text reads as reStructuredText markup: "(batch, *obs_shape)" opens an emphasis and
-# "π(·|obs, θ)" a substitution. Each is escaped here, where it is rendered, not in the package's sources.
-DOCSTRING_ESCAPES = {
-    "*obs_shape": r"\*obs_shape",
-    "π(·|obs": r"π(·\|obs",
-}
-
-
-def escape_docstring_markup(app, what, name, obj, options, lines):
-    """Escape the ``DOCSTRING_ESCAPES`` of a docstring (Sphinx's ``autodoc-process-docstring`` event)."""
-    for i, line in enumerate(lines):
-        for text, escaped in DOCSTRING_ESCAPES.items():
-            line = line.replace(text, escaped)
-        lines[i] = line
-
-
-def setup(app):
-    app.connect("autodoc-process-docstring", escape_docstring_markup)

@@ -303,7 +303,7 @@ def tile_coordinates(
     ``tiles3.tiles(None, n_tilings, f)`` returns them (less its leading tiling number) for the scaled observation
     f = tiles_per_dim · (clip(x, low, high) − origin) / (high − low). See the module's docstring.
 
-    :param observations: a batch of observations, shape (batch, *obs_shape); flattened to (batch, n_dims)
+    :param observations: a batch of observations, shape ``(batch, *obs_shape)``; flattened to ``(batch, n_dims)``
     :param n_tilings: number of tilings (the book advises a power of 2 at least 4 × n_dims)
     :param tiles_per_dim: tiles across [low, high] in each dimension (one int for all, or one per dimension)
     :param low: lower end of the range of each dimension (one number for all, or one per dimension); below is clipped
@@ -331,7 +331,7 @@ def tile_indices(
     The index of the active tile of each tiling (Sutton & Barto §9.5.4): the positions of the n_tilings ones in the
     binary feature vector ``TileCoding`` returns, for linear methods that sum weights instead of multiplying by x.
 
-    :param observations: a batch of observations, shape (batch, *obs_shape); flattened to (batch, n_dims)
+    :param observations: a batch of observations, shape ``(batch, *obs_shape)``; flattened to ``(batch, n_dims)``
     :param n_tilings: number of tilings
     :param tiles_per_dim: tiles across [low, high] in each dimension (one int for all, or one per dimension)
     :param low: lower end of the range of each dimension; observations below are clipped
@@ -448,7 +448,7 @@ class TileCoding(BaseFeaturesExtractor):
 
     def active_tiles(self, observations: th.Tensor) -> th.Tensor:
         """
-        :param observations: a batch of observations, shape (batch, *obs_shape)
+        :param observations: a batch of observations, shape ``(batch, *obs_shape)``
         :return: the index of the active tile of each tiling, shape (batch, n_tilings), int64 (``tile_indices``)
         """
 
@@ -462,7 +462,7 @@ class TileCoding(BaseFeaturesExtractor):
 
     def forward(self, observations: th.Tensor) -> th.Tensor:
         """
-        :param observations: a batch of observations, shape (batch, *obs_shape)
+        :param observations: a batch of observations, shape ``(batch, *obs_shape)``
         :return: the tile features x(s), shape (batch, features_dim), float32: binary, n_tilings ones per row; with
             ``hash_size``, the count of tilings hashed to each feature (collisions give 2 or more; each row sums to
             n_tilings)
@@ -484,7 +484,7 @@ class TileCoding(BaseFeaturesExtractor):
         PyTorch's (the per-step loop codes one observation at every env step; with a linear q̂ over these features
         ``NStepSARSA`` sums and updates the active tiles' weights, as the book's ``tiles3`` code does).
 
-        :param observations: a batch of observations, shape (batch, *obs_shape), any real dtype
+        :param observations: a batch of observations, shape ``(batch, *obs_shape)``, any real dtype
         :return: the index of the active tile of each tiling, shape (batch, n_tilings), int64; with ``hash_size``,
             hashed indices, which may repeat within a row
         :raises ValueError: if an observation has a NaN
@@ -514,7 +514,7 @@ class TileCoding(BaseFeaturesExtractor):
         """
         ``forward`` for a batch on the CPU without hashing, from ``active_tiles_numpy``.
 
-        :param observations: a batch of observations, shape (batch, *obs_shape)
+        :param observations: a batch of observations, shape ``(batch, *obs_shape)``
         :return: the binary tile features, shape (batch, features_dim), float32
         """
         indices = self.active_tiles_numpy(observations)

@@ -205,7 +205,7 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
 
     def sample_actions(self, obs: PyTorchObs) -> th.Tensor:
         """
-        A ~ π(·|obs, θ), the behaviour policy of the rollout loop: the actions of ``forward(obs)`` where a subclass
+        ``A ~ π(·|obs, θ)``, the behaviour policy of the rollout loop: the actions of ``forward(obs)`` where a subclass
         overrides it (as SB3's A2C acts with them), else a draw from ``get_distribution(obs)``. For Discrete
         actions, where a subclass overrides none of SB3's hooks of that distribution, this is the draw
         ``CategoricalDistribution.sample()`` makes (the same ``multinomial`` call on the soft-max of the logits),
