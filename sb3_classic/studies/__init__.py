@@ -1,5 +1,5 @@
 """
-Hyperparameter studies (issue 14): a study file names an env, an algorithm, base hyperparameters in the zoo's YAML
+Hyperparameter studies: a study file names an env, an algorithm, base hyperparameters in the zoo's YAML
 form, variants, seeds, a budget and the claims under test; each (variant, seed) is a cached run of the harness
 (``sb3_classic.harness``), and the claims are decided by bootstrap confidence intervals over seeds.
 
