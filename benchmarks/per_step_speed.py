@@ -1,5 +1,5 @@
 """
-Speed of the per-step mode against hand-written loops of the same algorithm (issue 12), env steps per second of
+Speed of the per-step mode against hand-written loops of the same algorithm, env steps per second of
 training from scratch, one env, torch 1 thread:
 
 1. ``NStepSARSA`` (per step, tile coding, linear SGD: the book's Figs 10.1–10.4) on Mountain Car against a NumPy
@@ -188,7 +188,7 @@ steps of training from scratch per timed run, {args.repeats} repeats, the packag
 The loops: `benchmarks/textbook_numpy.py`'s `mountain_car_sarsa` is the box of S&B §10.2 with the same tiles,
 `benchmarks/per_step_speed.py`'s `torch_mlp_sarsa` one-step SARSA with the same network and Adam, one update per step.
 
-| Comparison | `NStepSARSA` per step (steps/s) | Loop (steps/s) | Ratio | Target (issue 12) | |
+| Comparison | `NStepSARSA` per step (steps/s) | Loop (steps/s) | Ratio | Target | |
 |---|---|---|---|---|---|
 {chr(10).join(rows)}
 """

@@ -1,5 +1,5 @@
 """
-The benchmarks of issue 5, in one command: REINFORCE and NStepSARSA with the package's hyperparameters, and SB3's
+The benchmarks, in one command: REINFORCE and NStepSARSA with the package's hyperparameters, and SB3's
 A2C, PPO and DQN with rl-zoo3's, on CartPole-v1 and Acrobot-v1 with the same step budget and seeds; then the tables
 and plots of benchmarks/results/; then the throughput of learn() against A2C's.
 

@@ -1,5 +1,5 @@
 """
-The book's figures, with the package's public API (issue 12): Figs 7.2, 10.1, 10.3, 10.4, 13.1 and 13.2 of Sutton &
+The book's figures, with the package's public API: Figs 7.2, 10.1, 10.3, 10.4, 13.1 and 13.2 of Sutton &
 Barto, Reinforcement Learning: An Introduction, 2nd ed., reproduced with ``NStepSARSA`` and ``REINFORCE`` in their
 per-step mode (the book's updates, see ``tests/test_book_updates.py``), and the book's numbers beside ours.
 

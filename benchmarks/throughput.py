@@ -41,7 +41,7 @@ from sb3_classic.harness.common import (
 THROUGHPUT_ALGOS = ("a2c", "reinforce", "nstep_sarsa")
 BASELINE = "a2c"
 NET_ARCH = [64, 64]
-#: Issue 13's target with the tuned settings: at least this many times A2C's env steps per second (issue 5's was 1.5×)
+#: The target with the tuned settings: at least this many times A2C's env steps per second
 TARGET_RATIO = 2.0
 
 T = TypeVar("T")
@@ -281,7 +281,7 @@ def throughput_header(command: str, settings: ThroughputSettings) -> str:
         f"all networks `net_arch={NET_ARCH}`, otherwise each algorithm's zoo YAML entry for the env "
         "(A2C: rl-zoo3's, which is SB3's defaults here), without VecNormalize; torch 1 thread, device cpu. "
         f"Ratios are ours divided by A2C's within the same repeat: median (min–max) over repeats. "
-        f"Target of issue 13: ≥ {TARGET_RATIO:g}× at n_envs 1 and 8 (issue 5's was ≥ 1.5×).\n\nVersions: {versions}."
+        f"Target: ≥ {TARGET_RATIO:g}× A2C's env steps per second at n_envs 1 and 8.\n\nVersions: {versions}."
         + (f"\n\nChanged from the YAML entries (`--set`): {changes}." if changes else "")
     )
 
