@@ -334,7 +334,7 @@ def test_throughput_set_needs_a_results_dir(capsys: pytest.CaptureFixture[str]) 
 @pytest.mark.parametrize(
     ("command", "argv", "message"),
     [
-        # 0 used to be taken as "the default" (`args.steps or default`): --steps 0 --repeats 0 ran the full benchmark
+        # 0 is refused, not taken as "the default" (`args.steps or default`), which would run the full benchmark
         (throughput_main, ["--steps", "0"], "--steps: '0' is not an integer >= 1"),
         (throughput_main, ["--steps", "-100"], "--steps: '-100' is not an integer >= 1"),
         (throughput_main, ["--n-envs", "0"], "--n-envs: '0' is not an integer >= 1"),

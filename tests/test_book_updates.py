@@ -1,6 +1,6 @@
 """
 The book's per-step updates, exactly: with a linear model and plain SGD, the weights after several episodes equal those
-of a direct NumPy transcription of the book's pseudocode (same features, same actions), to 1e-6 (issue 12).
+of a direct NumPy transcription of the book's pseudocode (same features, same actions), to 1e-6.
 
 - n-step SARSA: the box "Episodic semi-gradient n-step Sarsa for estimating q̂ ≈ q*" (S&B §10.2), for n = 1, 4 and
   an n longer than every episode;
@@ -232,7 +232,7 @@ def test_tabular_sarsa_on_cliff_walking_is_the_books(expected: bool) -> None:
 )
 def test_the_book_loops_update_is_train_to_the_last_bit(kwargs: dict[str, Any], monkeypatch: pytest.MonkeyPatch) -> None:
     """
-    The per-step loop's own update between episode ends (``_book_loop_step``, issue 12's speed) against the general
+    The per-step loop's own update between episode ends (``_book_loop_step``, for the per-step mode's speed) against the general
     ``train()`` it stands for: a 2×32 MLP with Adam and time-limit truncations (CartPole cut at 30 steps), the same
     parameters bit for bit and the same log.
     """
@@ -319,7 +319,7 @@ def test_direct_linear_sgd_update_is_autograds_to_the_last_bit(
 ) -> None:
     """
     The per-step mode's update of a linear q̂ with plain SGD on dense features, applied to W_a without autograd
-    (issue 12's speed), gives the parameters and the log of autograd and ``torch.optim.SGD`` bit for bit: over tile
+    (for the per-step mode's speed), gives the parameters and the log of autograd and ``torch.optim.SGD`` bit for bit: over tile
     coding's dense features on Mountain Car (its sparse path switched off), with a bias, Expected SARSA and updates of
     several transitions at once.
     """

@@ -1,5 +1,5 @@
 """
-The study runner as a user of the installed package runs it (issue 14): ``python -m sb3_classic.studies
+The study runner as a user of the installed package runs it: ``python -m sb3_classic.studies
 my_study.yml`` in a folder of their own, with nothing of the repository: its cache and outputs land in that folder.
 """
 

@@ -2,7 +2,7 @@
 Learning checks with the package's own hyperparameters (hyperparams/*.yml, as rl-zoo3 reads them).
 
 The default run has one quick check per algorithm (a clearly learned CartPole); the ``slow`` ones hold the
-algorithms to the issues' bar: a mean evaluation return of 475 on CartPole-v1 and −100 on Acrobot-v1 within
+algorithms to the target: a mean evaluation return of 475 on CartPole-v1 and −100 on Acrobot-v1 within
 1000 episodes. Run them with ``python -m pytest -m slow``.
 """
 

@@ -1,4 +1,4 @@
-"""Hyperparameter studies (issue 14): the study file's checks, the statistics and verdicts, the episode budget, the
+"""Hyperparameter studies: the study file's checks, the statistics and verdicts, the episode budget, the
 seed report's study files, and a tiny study run end to end by the command."""
 
 import contextlib
@@ -537,7 +537,7 @@ def test_step_budget_keys_are_unchanged() -> None:
 
 #: The report's comparisons (Figs 2–7, 9–17, 20–23, 25–29) and final models (Figs 8, 18, 24, 30)
 REPORT_FIGURES = [*range(2, 19), *range(20, 31)]
-PER_STEP_MERGED = all("update_mode" in inspect.signature(algo.__init__).parameters for algo in (REINFORCE, NStepSARSA))
+PER_STEP_MODE = all("update_mode" in inspect.signature(algo.__init__).parameters for algo in (REINFORCE, NStepSARSA))
 
 
 def test_every_figure_of_the_report_has_a_study_file() -> None:
@@ -545,7 +545,7 @@ def test_every_figure_of_the_report_has_a_study_file() -> None:
     assert figures == REPORT_FIGURES
 
 
-@pytest.mark.skipif(not PER_STEP_MERGED, reason="the studies use update_mode='per_step' (the textbook issue's branch)")
+@pytest.mark.skipif(not PER_STEP_MODE, reason="the studies use update_mode='per_step'")
 def test_the_report_studies_load() -> None:
     runs = 0
     for path in sorted(SEED_REPORT_STUDIES.glob("*.yml")):
@@ -608,7 +608,7 @@ def test_reduced_runs_of_other_budgets_keep_their_own_outputs(tmp_path: Path) ->
 @pytest.mark.parametrize(
     ("options", "message"),
     [
-        # Each used to run (or cache as done) nonsense: -5 episodes per run, 0 seeds, a table of nan, exit status 0
+        # Each would otherwise run (or cache as done) nonsense: -5 episodes per run, 0 seeds, a table of nan, exit status 0
         (["--episodes", "-5"], "--episodes: '-5' is not an integer >= 1"),
         (["--steps", "0"], "--steps: '0' is not an integer >= 1"),
         (["--seeds", "0"], "--seeds: '0' is not an integer >= 1"),

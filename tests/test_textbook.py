@@ -1,5 +1,5 @@
 """
-The book's figures (issue 12, ``benchmarks/textbook.py``): the pipeline end to end on tiny runs, the pieces that could
+The book's figures (``benchmarks/textbook.py``): the pipeline end to end on tiny runs, the pieces that could
 silently change a figure's number, and (``-m slow``) the book's published numbers on fewer runs, with tolerances
 from their standard errors.
 """

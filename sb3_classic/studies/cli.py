@@ -89,8 +89,8 @@ def load_studies(
     :param seeds: a reduced run's seeds (``StudySpec.with_budget``), if any
     :param episodes: its episode budget, if any
     :param steps: its step budget, if any
-    :return: the studies, and the errors of every file that failed (all of them: a folder of studies used to stop at
-        its first bad file)
+    :return: the studies, and the errors of every file that failed (all of them, so that a folder of studies does not
+        stop at its first bad file)
     """
     studies, errors = [], []
     try:
