@@ -21,8 +21,6 @@ from rich.console import Console
 
 from benchmarks import hot_paths, per_step_speed, textbook
 from benchmarks.common import REPO_ROOT, parse_overrides
-from benchmarks.diagnostics import per_step_overhead
-from benchmarks.diagnostics.common import Variant, collect
 from benchmarks.report import (
     Results,
     episode_curves,
@@ -446,25 +444,6 @@ def test_episode_curves_share_the_episodes_every_run_completed() -> None:
     assert (curves["reinforce"]["count"] == 3).all()
 
 
-def test_diagnostics_label_runs_made_with_an_earlier_yaml_entry(tmp_path: Path) -> None:
-    """A diagnostic variant is a change to the YAML entry: a run cached while the entry was different is not that
-    variant today, and the tables must say what differed rather than pool it with today's runs."""
-
-    variant = Variant("yaml", NStepSARSA, {"n_steps": 4}, "the entry, with n = 4")
-    current = variant.hyperparams("nstep_sarsa", "Acrobot-v1")
-    earlier = {**current, "gamma": 0.5}
-    del earlier["n_steps"]
-    for seed, params in ((0, current), (1, earlier), (2, current)):
-        run_dir = tmp_path / "sarsa" / "Acrobot-v1" / "yaml" / f"seed_{seed}-1000"
-        run_dir.mkdir(parents=True)
-        (run_dir / "run.json").write_text(json.dumps({"hyperparams": params}))
-    found = collect("sarsa", "nstep_sarsa", "Acrobot-v1", [variant], 1000, cache_dir=tmp_path)
-    assert {name: list(runs) for name, runs in found.items()} == {
-        "yaml": [0, 2],
-        "yaml [earlier: gamma=0.5, n_steps=(unset)]": [1],
-    }
-
-
 def test_benchmark_set_changes_only_the_named_algorithms_entries() -> None:
     overrides = parse_overrides(
         ["nstep_sarsa.max_grad_norm=10.0", "nstep_sarsa.learning_rate=lin_1e-3", "nstep_sarsa.tau=5e-3"],
@@ -589,22 +568,3 @@ def test_run_names_are_shown_as_they_are(
     assert failed == specs[1:]
     assert "done: study a [reading] seed 0" in output
     assert "failed: study a [reading] seed 1: boom" in output
-
-
-def test_per_step_overhead_puts_everything_back(tmp_path: Path) -> None:
-    """The diagnostic replaces class attributes for its variants; afterwards every one is the package's and torch's again."""
-    owners = (
-        NStepSARSA,
-        per_step_overhead.Logger,
-        per_step_overhead.TrajectoryBuffer,
-        th.Tensor,
-        th.optim.Adam,
-        th.nn.Sequential,
-    )
-    NStepSARSA("MlpPolicy", "CartPole-v1", device="cpu")  # (torch wraps Adam.step with its hooks at a first Adam)
-    before = [dict(vars(owner)) for owner in owners]
-    assert per_step_overhead.main(["--steps", "60", "--repeats", "1", "--output", str(tmp_path / "out.md")]) == 0
-    assert [dict(vars(owner)) for owner in owners] == before
-    text = (tmp_path / "out.md").read_text()
-    for row in ("| the package |", "| without its bookkeeping |", "| PyTorch loop |"):
-        assert row in text

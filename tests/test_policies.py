@@ -280,8 +280,8 @@ class NoisySARSAPolicy(SARSAPolicy):
 
 
 def test_a_layer_of_the_users_is_put_in_eval_mode_for_predict() -> None:
-    # set_training_mode only flipped the policy's and q_net's flags where no dropout or batch norm was found: the
-    # NoisyNet layer stayed in train mode, and predict(deterministic=True) was random (DQN's is not)
+    # set_training_mode flips every module's flag, not only where dropout or batch norm is found: otherwise the
+    # NoisyNet layer would stay in train mode, and predict(deterministic=True) would be random (DQN's is not)
     model = NStepSARSA(NoisySARSAPolicy, "CartPole-v1", seed=0, device="cpu")
     model.learn(100)
     obs = np.array([0.01, 0.0, 0.01, 0.0], dtype=np.float32)
