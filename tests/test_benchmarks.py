@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import pytest
-import torch as th
 from rich.console import Console
 
 from benchmarks import hot_paths, per_step_speed, textbook

@@ -232,9 +232,9 @@ def test_tabular_sarsa_on_cliff_walking_is_the_books(expected: bool) -> None:
 )
 def test_the_book_loops_update_is_train_to_the_last_bit(kwargs: dict[str, Any], monkeypatch: pytest.MonkeyPatch) -> None:
     """
-    The per-step loop's own update between episode ends (``_book_loop_step``, for the per-step mode's speed) against the general
-    ``train()`` it stands for: a 2×32 MLP with Adam and time-limit truncations (CartPole cut at 30 steps), the same
-    parameters bit for bit and the same log.
+    The per-step loop's own update between episode ends (``_book_loop_step``, for the per-step mode's speed) against
+    the general ``train()`` it stands for: a 2×32 MLP with Adam and time-limit truncations (CartPole cut at 30 steps),
+    the same parameters bit for bit and the same log.
     """
 
     def run() -> tuple[list[th.Tensor], dict[str, Any]]:
@@ -319,9 +319,9 @@ def test_direct_linear_sgd_update_is_autograds_to_the_last_bit(
 ) -> None:
     """
     The per-step mode's update of a linear q̂ with plain SGD on dense features, applied to W_a without autograd
-    (for the per-step mode's speed), gives the parameters and the log of autograd and ``torch.optim.SGD`` bit for bit: over tile
-    coding's dense features on Mountain Car (its sparse path switched off), with a bias, Expected SARSA and updates of
-    several transitions at once.
+    (for the per-step mode's speed), gives the parameters and the log of autograd and ``torch.optim.SGD`` bit for bit:
+    over tile coding's dense features on Mountain Car (its sparse path switched off), with a bias, Expected SARSA and
+    updates of several transitions at once.
     """
     monkeypatch.setattr(NStepSARSA, "_tile_coded_q", lambda self: None)
     direct_updates, (fast, general) = _linear_sarsa_runs(
