@@ -8,7 +8,7 @@ Each row is the wall time of the whole command (start-up and evaluations include
 commands run in turn, pair by pair, so that a drift of the machine's speed moves both. Then the README's main job
 once under the same load, with the package's default.
 
-    python -m benchmarks.threads                 # into benchmarks/results/threads.md: about 10 minutes on 2 cores
+    python -m benchmarks.threads                 # into benchmarks/results/threads.md: 10 to 25 minutes on 2 cores
     python -m benchmarks.threads --repeats 1 --no-main-job --results-dir /tmp/threads   # a quick look
 """
 
