@@ -161,6 +161,18 @@ def refuse_policy_kwargs_set_here(algorithm: str, policy_kwargs: Mapping[str, An
             )
 
 
+def check_policy_class(algorithm: str, policy_class: Any, policy_aliases: Mapping[str, type]) -> None:
+    """
+    :param algorithm: the algorithm's class name
+    :param policy_class: the policy class to build
+    :param policy_aliases: the algorithm's policies by name
+    :raises TypeError: if it is not one of them or a subclass of one (``foreign_policy_message``)
+    """
+    own_policies = tuple(policy_aliases.values())
+    if own_policies and not (isinstance(policy_class, type) and issubclass(policy_class, own_policies)):
+        raise TypeError(foreign_policy_message(algorithm, policy_class, policy_aliases))
+
+
 def foreign_policy_message(algorithm: str, policy_class: Any, policy_aliases: Mapping[str, type]) -> str:
     """
     :param algorithm: the algorithm's class name

@@ -1,6 +1,7 @@
 """
 Checks of what the envs return to the rollout loop (a NaN or ±inf value, a final observation of the wrong shape, a
-truncation without its final observation), with errors and warnings that name the env, the step and the fix. The loop
+truncation without its final observation, an episode that does not end), with errors and warnings that name the env,
+the step and the fix. The loop
 runs them before a step is stored, so that no update trains on such a value.
 """
 
@@ -116,5 +117,22 @@ def warn_truncation_without_final_observation(model: BaseAlgorithm, env_idx: int
         "observation (infos[i]['terminal_observation']): there is nothing to bootstrap from, so "
         f"{type(model).__name__} trains it as a termination. SB3's VecEnvs put it there; a VecEnv of your own should "
         "too (or pass handle_timeout_termination=False to treat every truncation as a termination)",
+        stacklevel=4,
+    )
+
+
+def warn_episodes_cut(model: BaseAlgorithm, env_indices: list[int], max_episode_length: int) -> None:
+    """
+    Episodes that reach ``max_episode_length`` are cut for training, but their envs go on: warn what that means.
+
+    :param model: the algorithm training on the envs
+    :param env_indices: the envs whose episodes are cut
+    :param max_episode_length: the cap
+    """
+    warnings.warn(
+        f"Episodes of envs {env_indices} reached max_episode_length={max_episode_length} steps without ending: "
+        f"{type(model).__name__} cut them there for training (their returns end there, bootstrapped as at a time limit), "
+        "but the envs go on: the next episodes trained on start where these stopped, and the Monitor and callbacks do not "
+        "count the cuts. Wrap the env in gymnasium.wrappers.TimeLimit (which resets it), or raise max_episode_length.",
         stacklevel=4,
     )

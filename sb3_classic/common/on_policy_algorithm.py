@@ -19,14 +19,19 @@ from stable_baselines3.common.vec_env import VecEnv
 from sb3_classic.common.arguments import (
     BASE_ARGUMENT_RULES,
     check_arguments,
+    check_policy_class,
     check_policy_kwargs,
-    foreign_policy_message,
     refuse_policy_kwargs_set_here,
 )
 from sb3_classic.common.buffers import Observations, TrajectoryBuffer, all_finite, select
-from sb3_classic.common.env_checks import check_final_observation, raise_non_finite, warn_truncation_without_final_observation
+from sb3_classic.common.env_checks import (
+    check_final_observation,
+    raise_non_finite,
+    warn_episodes_cut,
+    warn_truncation_without_final_observation,
+)
 from sb3_classic.common.policies import action_offset
-from sb3_classic.common.save_util import SafeSaveLoadMixin
+from sb3_classic.common.save_util import SafeSaveLoadMixin, episodes_not_continued
 from sb3_classic.common.schedules import StepDecay
 from sb3_classic.common.utils import check_positive_int
 
@@ -175,9 +180,7 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
     def _setup_model(self) -> None:
         # First: with a file saved by another algorithm (load() takes its policy class), the argument checks would fail
         # on the first of that algorithm's values this one reads differently (DQN's train_freq tuple, say), misleadingly
-        own_policies = tuple(self.policy_aliases.values())
-        if own_policies and not (isinstance(self.policy_class, type) and issubclass(self.policy_class, own_policies)):
-            raise TypeError(foreign_policy_message(type(self).__name__, self.policy_class, self.policy_aliases))
+        check_policy_class(type(self).__name__, self.policy_class, self.policy_aliases)
         if self.max_grad_norm is None:
             # No clipping, as the constructor stores it (load(..., max_grad_norm=None) sets None: rl-zoo3's -i)
             self.max_grad_norm = math.inf
@@ -309,14 +312,7 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
         if self.max_episode_length is not None:
             overlong = ~dones & (self.rollout_buffer.episode_length + 1 >= self.max_episode_length)
             if overlong.any():
-                warnings.warn(
-                    f"Episodes of envs {np.flatnonzero(overlong).tolist()} reached max_episode_length="
-                    f"{self.max_episode_length} steps without ending: {type(self).__name__} cut them there for "
-                    "training (their returns end there, bootstrapped as at a time limit), but the envs go on: the next "
-                    "episodes trained on start where these stopped, and the Monitor and callbacks do not count the "
-                    "cuts. Wrap the env in gymnasium.wrappers.TimeLimit (which resets it), or raise max_episode_length.",
-                    stacklevel=3,
-                )
+                warn_episodes_cut(self, np.flatnonzero(overlong).tolist(), self.max_episode_length)
                 ends = dones | overlong
                 truncated = truncated | (overlong & self.handle_timeout_termination)
                 if self.handle_timeout_termination:
@@ -468,29 +464,11 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
         tb_log_name: str = "run",
         progress_bar: bool = False,
     ) -> tuple[int, BaseCallback]:
-        saved_envs = None if self._last_episode_starts is None else len(self._last_episode_starts)
-        reason = None
         if not reset_num_timesteps and self._last_obs is not None:
-            if saved_envs not in (None, self.n_envs):
-                # load(..., env=<another number of envs>, force_reset=False): the file's last observations are of
-                # other envs (NumPy's "operands could not be broadcast" otherwise)
-                reason = (
-                    f"This model's file holds the last observations of {saved_envs} envs, and its env has {self.n_envs}: "
-                    f"{type(self).__name__} resets the envs. (load(..., force_reset=False) continues the saved envs' "
-                    "episodes only with the same number of envs"
-                )
-            elif self._episodes_missing_their_start():
-                # A model loaded with force_reset=False: the file has the envs' last observations but not the buffer,
-                # so the episodes in progress would be trained from where the file left them as if they began there
-                # (the wrong t in γ^t and in episode lengths, REINFORCE's returns of a part of an episode)
-                reason = (
-                    "The episodes in progress when this model was saved are not in its file (the buffer is not saved): "
-                    f"{type(self).__name__} resets the envs to train on whole episodes. (load(..., force_reset=False) "
-                    "cannot continue an episode here"
-                )
-        if reason is not None:
-            warnings.warn(f"{reason}; the learned parameters and counts are kept)", stacklevel=3)
-            self._last_obs = None
+            reason = episodes_not_continued(self, self.rollout_buffer.episode_length)
+            if reason is not None:
+                warnings.warn(reason, stacklevel=3)
+                self._last_obs = None
         if reset_num_timesteps or self._last_obs is None:
             # The envs are about to be reset: the episodes in progress in the buffer cannot be continued
             self.rollout_buffer.reset()
@@ -504,13 +482,6 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
         self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
         self._on_learn_start()
         return total_timesteps, callback
-
-    def _episodes_missing_their_start(self) -> bool:
-        """:return: whether an env is in the middle of an episode whose earlier steps the buffer does not hold"""
-        starts = self._last_episode_starts
-        if starts is None:
-            return True
-        return bool(np.any(~np.asarray(starts, dtype=bool) & (self.rollout_buffer.episode_length == 0)))
 
     def _on_learn_start(self) -> None:
         """Called by ``learn()`` once set up (``num_timesteps`` reset or not, the progress of this call at its start)."""

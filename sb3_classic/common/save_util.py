@@ -1,7 +1,7 @@
 """
 Saving and loading that leave no file or model half-changed: ``save`` replaces the file at once, ``set_parameters``
-loads all or nothing, and ``load`` checks the arguments it changes, naming one that would build other networks than
-the saved ones.
+loads all or nothing, ``load`` checks the arguments it changes, naming one that would build other networks than the
+saved ones, and a model loaded with ``force_reset=False`` continues its saved envs' episodes only where it can.
 """
 
 import copy
@@ -15,6 +15,7 @@ import warnings
 from collections.abc import Callable, Iterable
 from typing import Any, ClassVar, TypeVar
 
+import numpy as np
 import torch as th
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.save_util import load_from_zip_file, recursive_getattr
@@ -195,3 +196,36 @@ class SafeSaveLoadMixin(BaseAlgorithm):
             for name, state in before.items():
                 recursive_getattr(self, name).load_state_dict(state)
             raise
+
+
+def episodes_not_continued(model: BaseAlgorithm, episode_length: np.ndarray) -> str | None:
+    """
+    :param model: a model whose ``learn()`` would continue the envs' episodes (``reset_num_timesteps=False``, with the
+        envs' last observations: ``load(..., force_reset=False)``)
+    :param episode_length: the steps of each env's episode that its buffer holds
+    :return: why ``learn()`` resets the envs instead, as a warning; ``None`` if it can continue them
+    """
+    saved_envs = None if model._last_episode_starts is None else len(model._last_episode_starts)
+    algorithm = type(model).__name__
+    if saved_envs not in (None, model.n_envs):
+        # load(..., env=<another number of envs>, force_reset=False): the file's last observations are of other envs
+        # (NumPy's "operands could not be broadcast" otherwise)
+        reason = (
+            f"This model's file holds the last observations of {saved_envs} envs, and its env has {model.n_envs}: "
+            f"{algorithm} resets the envs. (load(..., force_reset=False) continues the saved envs' episodes only with the "
+            "same number of envs"
+        )
+    elif model._last_episode_starts is None or np.any(
+        ~np.asarray(model._last_episode_starts, dtype=bool) & (episode_length == 0)
+    ):
+        # An env is in the middle of an episode whose earlier steps the buffer does not hold (the file has the envs'
+        # last observations but not the buffer): it would be trained from where the file left it as if it began there
+        # (the wrong t in γ^t and in episode lengths, REINFORCE's returns of a part of an episode)
+        reason = (
+            "The episodes in progress when this model was saved are not in its file (the buffer is not saved): "
+            f"{algorithm} resets the envs to train on whole episodes. (load(..., force_reset=False) cannot continue an "
+            "episode here"
+        )
+    else:
+        return None
+    return f"{reason}; the learned parameters and counts are kept)"
