@@ -10,6 +10,8 @@ from collections.abc import Callable, Mapping, Sequence
 from functools import partial
 from typing import Any
 
+from torch import nn
+
 from sb3_classic.common.utils import check_bool, check_choice, check_learning_rate, check_positive_int, check_range
 
 #: True while ``load()`` builds a model (the rules then accept a learning rate of 0: rl-zoo3's ``enjoy`` loads with
@@ -210,23 +212,30 @@ def _rejected_keyword(receiver: Any, kwargs: Any) -> tuple[str, str] | None:
     """
     :param receiver: a class that is called with ``kwargs``
     :param kwargs: its keyword arguments
-    :return: the first keyword argument its constructor does not take, with the qualified name of the constructor
-        that does not take it (where the ``**kwargs`` passed on end), as Python's ``TypeError`` names them; ``None`` if
-        it takes them all, or if its signature does not say (every constructor passes ``**kwargs`` on)
+    :return: the first keyword argument its constructor does not take, with the name of the constructor that refuses
+        it (where the ``**kwargs`` passed on end), as the ``TypeError`` of the call would name them; ``None`` if it takes
+        them all, or if only the call can say (a constructor of the user's that takes ``**kwargs`` may use them itself)
     """
     if not (isinstance(receiver, type) and isinstance(kwargs, Mapping)):
         return None
     for klass in receiver.__mro__:
         init = klass.__dict__.get("__init__")
-        if init is not None and all(
-            parameter.kind is not parameter.VAR_KEYWORD for parameter in inspect.signature(init).parameters.values()
-        ):
+        if init is None:
+            continue
+        if klass is nn.Module:
+            # (its *args, **kwargs: it refuses any keyword argument, naming the class called)
+            refused_by = f"{receiver.__name__}.__init__"
             break
+        if all(parameter.kind is not parameter.VAR_KEYWORD for parameter in inspect.signature(init).parameters.values()):
+            refused_by = init.__qualname__
+            break
+        if not klass.__module__.startswith("sb3_classic."):
+            return None  # (this package's constructors pass their **kwargs on to their parent's)
     else:
         return None
     accepted = constructor_parameters(receiver)
     key = next((key for key in kwargs if key not in accepted), None)
-    return None if key is None else (key, init.__qualname__)
+    return None if key is None else (key, refused_by)
 
 
 def _policy_kwargs_hint(algorithm: str, policy_class: type, policy_kwargs: Mapping[str, Any], receiver: str) -> str:
