@@ -37,7 +37,12 @@ def optional(check: Callable[[str, Any], None]) -> Callable[[str, Any], None]:
 
 
 def check_learning_rate_unless_loading(name: str, value: Any) -> None:
-    """``check_learning_rate``, with 0 accepted while ``load()`` builds the model (``LOADING``)."""
+    """
+    ``check_learning_rate``, with 0 accepted while ``load()`` builds the model (``LOADING``).
+
+    :param name: the argument's name
+    :param value: a positive float, or an SB3 schedule whose values are positive
+    """
     check_learning_rate(name, value, allow_zero=LOADING.get())
 
 
@@ -46,15 +51,21 @@ def check_max_grad_norm(name: str, value: Any) -> None:
     :param name: the argument's name
     :param value: a number > 0 (``math.inf``: no clipping; the constructor stores ``None`` as ``math.inf``)
     """
-    threshold: float = value
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+    # Any real number (NumPy's included), not a bool
+    number = isinstance(value, numbers.Real) and not isinstance(value, bool)
+    if not number:
         raise TypeError(f"{name}={value!r} must be a number > 0, or None for no clipping")
-    if not threshold > 0:
+    if not value > 0:
         raise ValueError(f"{name}={value!r} must be > 0, or None for no clipping")
 
 
 def check_decay_every_or_milestones(every: int | None, milestones: Sequence[int] | None) -> None:
-    """A decay is every k counts (``StepLR``) or at milestones (``MultiStepLR``), not both."""
+    """
+    A decay is every k counts (``StepLR``) or at milestones (``MultiStepLR``), not both.
+
+    :param every: ``lr_decay_every``
+    :param milestones: ``lr_decay_milestones``
+    """
     if every is not None and milestones is not None:
         raise ValueError("Pass lr_decay_every or lr_decay_milestones, not both")
 
@@ -76,7 +87,13 @@ def check_milestones(name: str, value: Any) -> None:
 
 
 def check_decay_has_a_step(factor: float, every: int | None, milestones: Sequence[int] | None) -> None:
-    """A decay factor other than 1 needs the counts to decay at."""
+    """
+    A decay factor other than 1 needs the counts to decay at.
+
+    :param factor: ``lr_decay_factor``
+    :param every: ``lr_decay_every``
+    :param milestones: ``lr_decay_milestones``
+    """
     if factor != 1.0 and every is None and milestones is None:
         raise ValueError(
             f"lr_decay_factor={factor!r} has no effect without lr_decay_every (a decay every k episodes or updates, like "

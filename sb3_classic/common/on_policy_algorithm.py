@@ -49,7 +49,8 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
     - learning rates given as SB3 schedules (of the training progress) times a step decay (of the completed
       episodes or updates, like PyTorch's ``StepLR``), and that training state kept across ``learn()``
       calls and ``save``/``load``;
-    - ``set_env`` with another number of envs.
+    - ``set_env`` with another number of envs;
+    - ``save``, ``load`` and ``set_parameters`` that leave no file or model half-changed (``SafeSaveLoadMixin``).
 
     :param policy: the policy model to use (``"MlpPolicy"``, ``"CnnPolicy"``, ``"MultiInputPolicy"`` or a class)
     :param env: the environment to learn from (if registered in Gymnasium, can be str)
