@@ -246,8 +246,10 @@ def _rejected_keyword(receiver: Any, kwargs: Any) -> tuple[str, str] | None:
         if all(parameter.kind is not parameter.VAR_KEYWORD for parameter in inspect.signature(init).parameters.values()):
             refused_by = init.__qualname__
             break
+        # A constructor of the user's that takes **kwargs may use them itself (this package's pass them on to their
+        # parent's): only the call can say
         if not klass.__module__.startswith("sb3_classic."):
-            return None  # (this package's constructors pass their **kwargs on to their parent's)
+            return None
     else:
         return None
     accepted = constructor_parameters(receiver)
@@ -255,25 +257,26 @@ def _rejected_keyword(receiver: Any, kwargs: Any) -> tuple[str, str] | None:
     return None if key is None else (key, refused_by)
 
 
-def _policy_kwargs_hint(algorithm: str, policy_class: type, policy_kwargs: Mapping[str, Any], receiver: str) -> str:
+def _policy_kwargs_hint(algorithm: str, policy_class: type, receiver: str, receiver_class: type, default: bool) -> str:
     """
     :param algorithm: the algorithm's class name
     :param policy_class: the policy class
-    :param policy_kwargs: the policy's keyword arguments
-    :param receiver: what does not take one of them: ``"policy"``, ``"features_extractor_class"`` or ``"activation_fn"``
-    :return: what takes it
+    :param receiver: what does not take a keyword argument it is given: ``"policy"``, or the policy's argument
+        ``"features_extractor_class"`` or ``"activation_fn"``
+    :param receiver_class: that class
+    :param default: whether it is the policy's default (not given in ``policy_kwargs``)
+    :return: what takes the keyword argument
     """
-    name = getattr(constructor_parameters(policy_class).get(receiver), "default", None)
-    name = getattr(policy_kwargs.get(receiver) or name, "__name__", name)
+    name = receiver_class.__name__
     if receiver == "features_extractor_class":
-        if policy_kwargs.get(receiver) is None:
+        if default:
             return (
                 f"features_extractor_kwargs go to features_extractor_class, here the default {name}: pass the class they "
                 "belong to (e.g. features_extractor_class=TileCoding for n_tilings and tiles_per_dim), or drop them"
             )
         return f"features_extractor_kwargs go to features_extractor_class={name}: give that class's own arguments"
     if receiver == "activation_fn":
-        if policy_kwargs.get(receiver) is None:
+        if default:
             return (
                 f"activation_kwargs go to activation_fn, here the default {name}: pass the activation they belong to "
                 "(e.g. activation_fn=nn.LeakyReLU for negative_slope), or drop them"
@@ -299,14 +302,15 @@ def check_policy_kwargs(algorithm: str, policy_class: type, policy_kwargs: Mappi
         it: the features extractor's or the activation's kwargs, or what ``policy_kwargs`` takes
     """
     defaults = constructor_parameters(policy_class)
-    receivers: list[tuple[str, Any, Any]] = [("policy", policy_class, policy_kwargs)]
+    # Each receiver, its class, the keyword arguments it is given, and whether it is the policy's default
+    receivers: list[tuple[str, Any, Any, bool]] = [("policy", policy_class, policy_kwargs, False)]
     for receiver, kwargs in _KWARGS_RECEIVERS:
         given = policy_kwargs.get(receiver)
         default = defaults[receiver].default if receiver in defaults else None
-        receivers.append((receiver, default if given is None else given, policy_kwargs.get(kwargs)))
-    for receiver, receiver_class, kwargs in receivers:
+        receivers.append((receiver, default if given is None else given, policy_kwargs.get(kwargs), given is None))
+    for receiver, receiver_class, kwargs, is_default in receivers:
         rejected = _rejected_keyword(receiver_class, kwargs)
         if rejected is not None:
-            key, init = rejected
-            hint = _policy_kwargs_hint(algorithm, policy_class, policy_kwargs, receiver)
-            raise TypeError(f"policy_kwargs: {init}() got an unexpected keyword argument '{key}'. {hint}")
+            key, refused_by = rejected
+            hint = _policy_kwargs_hint(algorithm, policy_class, receiver, receiver_class, is_default)
+            raise TypeError(f"policy_kwargs: {refused_by}() got an unexpected keyword argument '{key}'. {hint}")
