@@ -8,8 +8,9 @@ from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import FloatSchedule, explained_variance, obs_as_tensor
 
+from sb3_classic.common.arguments import LOADING
 from sb3_classic.common.buffers import TrainingBatch, select
-from sb3_classic.common.on_policy_algorithm import LOADING, ClassicOnPolicyAlgorithm
+from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
 from sb3_classic.common.returns import discounted_returns
 from sb3_classic.common.utils import check_bool, check_choice, check_learning_rate, check_positive_int, check_range
 from sb3_classic.reinforce.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, REINFORCEPolicy
