@@ -304,19 +304,34 @@ def _zoo_targets() -> tuple[dict[str, Any], dict[str, Any], dict[str, Any], type
     return algos, samplers, converters, manager, [vars(exp_manager), vars(utils)]
 
 
-def one_thread_unless_chosen(num_threads: int, device: th.device | str, verbose: int = 1) -> bool:
+#: PyTorch's number of intra-op threads when this module was imported: another one later was the user's choice
+_STARTING_THREADS = th.get_num_threads()
+
+
+def one_thread_unless_chosen(num_threads: int | None, device: th.device | str, verbose: int = 1) -> bool:
     """
     One PyTorch thread for a zoo run on the CPU, unless the user chose a number. The networks of these algorithms
     are small (two layers of 64 to 256 units, a batch of one to a few hundred rows) and they take a gradient step
     every few env steps: PyTorch's intra-op threads cost more to wake than they save, and on a machine with other
     work running each of those steps waits for a busy core. ``benchmarks/results/threads.md`` has the measurement.
 
-    :param num_threads: the zoo's ``--num-threads`` (``-1``, its default: not chosen)
+    A number is chosen by ``--num-threads N``, ``OMP_NUM_THREADS`` or ``MKL_NUM_THREADS``, or by a call of
+    ``torch.set_num_threads`` before the run; an ``ExperimentManager`` built in Python without the zoo's command-line
+    arguments (no ``num_threads`` in them) leaves the threads alone.
+
+    :param num_threads: the zoo's ``--num-threads`` (``-1``, its default: not chosen), or None outside its command line
     :param device: the zoo's ``--device``
     :param verbose: print what was set (0: nothing)
     :return: whether it set one thread
     """
-    if num_threads > 0 or "OMP_NUM_THREADS" in os.environ or get_device(device).type != "cpu":
+    chosen = (
+        num_threads is None
+        or num_threads > 0
+        or "OMP_NUM_THREADS" in os.environ
+        or "MKL_NUM_THREADS" in os.environ
+        or th.get_num_threads() != _STARTING_THREADS
+    )
+    if chosen or get_device(device).type != "cpu":
         return False
     th.set_num_threads(1)
     if verbose > 0:
@@ -338,16 +353,15 @@ def _patch_experiment_manager(manager: type) -> None:
     def __init__(*args: Any, **kwargs: Any) -> None:
         bound = signature.bind(*args, **kwargs)
         algo = bound.arguments.get("algo")
+        if algo in ALGORITHMS and bound.arguments.get("config") is None:
+            bound.arguments["config"] = str(hyperparams_path(algo))
+        original_init(*bound.args, **bound.kwargs)
         if algo in ALGORITHMS:
-            if bound.arguments.get("config") is None:
-                bound.arguments["config"] = str(hyperparams_path(algo))
-            zoo_args = bound.arguments.get("args")
             one_thread_unless_chosen(
-                getattr(zoo_args, "num_threads", -1),
+                getattr(bound.arguments.get("args"), "num_threads", None),
                 bound.arguments.get("device", "auto"),
                 bound.arguments.get("verbose", 1),
             )
-        original_init(*bound.args, **bound.kwargs)
 
     setattr(__init__, _PATCHED, True)
     manager.__init__ = __init__  # type: ignore[misc]

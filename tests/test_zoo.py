@@ -510,17 +510,28 @@ def test_zoo_trains_with_one_thread_unless_a_number_is_chosen(tmp_path: Path) ->
 
 
 def test_one_thread_unless_chosen(monkeypatch: pytest.MonkeyPatch) -> None:
+    import sb3_classic.zoo as zoo_module
+
     monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    monkeypatch.delenv("MKL_NUM_THREADS", raising=False)
+    monkeypatch.setattr(zoo_module, "_STARTING_THREADS", 2)  # (PyTorch's count when the module was imported)
     before = th.get_num_threads()
     try:
         th.set_num_threads(2)
         assert one_thread_unless_chosen(-1, "cpu", verbose=0)
         assert th.get_num_threads() == 1
+        # Chosen: --num-threads, an ExperimentManager without the zoo's arguments, the user's torch.set_num_threads
+        for num_threads, threads in ((2, 2), (None, 2), (-1, 3)):
+            th.set_num_threads(threads)
+            assert not one_thread_unless_chosen(num_threads, "cpu", verbose=0)
+            assert th.get_num_threads() == threads
+        # ... or the environment
         th.set_num_threads(2)
-        assert not one_thread_unless_chosen(2, "auto" if not th.cuda.is_available() else "cpu", verbose=0)
-        monkeypatch.setenv("OMP_NUM_THREADS", "2")
-        assert not one_thread_unless_chosen(-1, "cpu", verbose=0)
-        assert th.get_num_threads() == 2
+        for variable in ("OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+            with monkeypatch.context() as env:
+                env.setenv(variable, "2")
+                assert not one_thread_unless_chosen(-1, "cpu", verbose=0)
+            assert th.get_num_threads() == 2
     finally:
         th.set_num_threads(before)
 
