@@ -25,8 +25,6 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-import torch as th
-
 from benchmarks.common import DEFAULT_RESULTS_DIR, REPO_ROOT
 from benchmarks.report import markdown_table
 from sb3_classic.harness.common import code_versions
@@ -88,7 +86,15 @@ def main(argv: Sequence[str] | None = None) -> None:
 
     cores = os.cpu_count() or 1
     # PyTorch's default: what a process started without OMP_NUM_THREADS gets (the number of physical cores)
-    default_threads = th.get_num_threads() if "OMP_NUM_THREADS" not in os.environ else cores
+    default_threads = int(
+        subprocess.run(
+            [sys.executable, "-c", "import torch; print(torch.get_num_threads())"],
+            env={name: value for name, value in os.environ.items() if name != "OMP_NUM_THREADS"},
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout
+    )
     probe = [*PROBE, "-n", str(args.steps)]
     commands = {
         f"PyTorch's default, {default_threads} threads (`--num-threads {default_threads}`)": [

@@ -13,8 +13,8 @@ What ``register()`` changes in rl-zoo3, and nothing else:
 - ``rl_zoo3.hyperparams_opt.HYPERPARAMS_SAMPLER`` and ``HYPERPARAMS_CONVERTER`` gain their Optuna search spaces
   (``-optimize``) and the conversion of a stored trial back into constructor arguments (``--trial-id``);
 - ``ExperimentManager.__init__`` defaults ``config`` to this package's YAML for these two algorithms (``-conf``
-  still wins), and, for them, sets PyTorch to one thread on the CPU unless the user chose a number
-  (``--num-threads N`` or ``OMP_NUM_THREADS``): see ``one_thread_unless_chosen``;
+  still wins), and, for them, sets PyTorch to one thread on the CPU unless the user chose a number: see
+  ``one_thread_unless_chosen``;
 - ``ExperimentManager._preprocess_schedules`` also reads ``value_learning_rate`` (REINFORCE's second learning rate)
   as the zoo reads ``learning_rate``: ``lin_0.01`` for a linear schedule;
 - the names a YAML's ``policy_kwargs`` string may use (the zoo evaluates it in ``rl_zoo3.exp_manager``'s namespace,
