@@ -79,9 +79,11 @@ def _flatten(prefix: str, value: Any) -> list[tuple[str, Any]]:
     return [(prefix, value)]
 
 
-def _sarsa(env_id: str, n_envs: int, steps: int, **kwargs: Any) -> tuple[ClassicOnPolicyAlgorithm, int]:
+def _sarsa(
+    env_id: str, n_envs: int, steps: int, policy: str = "MlpPolicy", **kwargs: Any
+) -> tuple[ClassicOnPolicyAlgorithm, int]:
     env = make_vec_env(env_id, n_envs=n_envs, seed=0)
-    return NStepSARSA("MlpPolicy", env, seed=0, device="cpu", **kwargs), steps
+    return NStepSARSA(policy, env, seed=0, device="cpu", **kwargs), steps
 
 
 def _reinforce(n_envs: int, steps: int, **kwargs: Any) -> tuple[ClassicOnPolicyAlgorithm, int]:
@@ -116,7 +118,7 @@ CONFIGURATIONS: dict[str, Callable[[], tuple[ClassicOnPolicyAlgorithm, int]]] = 
     "sarsa-per-step-n1": lambda: _sarsa(
         "CartPole-v1", 1, 1500, n_steps=1, update_mode="per_step", train_freq=1, gradient_steps=1, policy_kwargs=SMALL_NET
     ),
-    # The book's Mountain Car: a linear q̂ over tile coding, plain SGD, per step
+    # The book's Mountain Car: a linear q̂ over tile coding with its own SGD update, per step
     "sarsa-tile-coded-mountain-car": lambda: _sarsa(
         "sb3_classic/MountainCarNoLimit-v0",
         1,
@@ -129,14 +131,8 @@ CONFIGURATIONS: dict[str, Callable[[], tuple[ClassicOnPolicyAlgorithm, int]]] = 
         learning_rate=0.5 / 8,
         exploration_initial_eps=0.0,
         exploration_final_eps=0.0,
-        policy_kwargs=dict(
-            net_arch=[],
-            with_bias=False,
-            weight_init=0.0,
-            optimizer_class=th.optim.SGD,
-            features_extractor_class=TileCoding,
-            features_extractor_kwargs=dict(n_tilings=8, tiles_per_dim=8),
-        ),
+        policy="LinearPolicy",
+        policy_kwargs=dict(features_extractor_class=TileCoding, features_extractor_kwargs=dict(n_tilings=8, tiles_per_dim=8)),
     ),
     # REINFORCE with a baseline: 1 env, 8 envs, and per step (§13.4's loop)
     "reinforce-1-env": lambda: _reinforce(1, 3000),

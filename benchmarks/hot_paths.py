@@ -8,7 +8,8 @@ can re-run the numbers behind those choices on their own machine:
 - **REINFORCE's action sampling** in the rollout loop, for 1 and 8 envs: SB3's ``get_distribution(obs).get_actions()``
   against ``REINFORCEPolicy.sample_actions`` (the same draw, without building a ``torch.distributions`` object);
 - **NStepSARSA's per-step update of a linear q̂** over tile coding with plain SGD (the book's Figs 10.1–10.4), through
-  autograd and ``torch.optim.SGD`` against the same update applied to the weights directly (``_linear_sgd_step``).
+  autograd and ``torch.optim.SGD`` against ``LinearPolicy``'s own update, applied to the weights directly
+  (``LinearQPolicy.sgd_step``), on the dense features and over the active tiles.
 
 Timed with ``torch.utils.benchmark`` (one thread, CPU).
 
@@ -67,11 +68,11 @@ def time_call(function: Callable[[], Any], min_run_time: float) -> float:
     return timer.blocked_autorange(min_run_time=min_run_time).median * 1e6
 
 
-def observation_batch(model: BaseAlgorithm, n: int) -> th.Tensor:
+def observation_batch(model: BaseAlgorithm, n: int) -> np.ndarray:
     """:return: ``n`` observations sampled (seeded) from ``model``'s observation space"""
     space = model.observation_space
     space.seed(0)
-    return th.as_tensor(np.stack([space.sample() for _ in range(n)]))
+    return np.stack([space.sample() for _ in range(n)])
 
 
 def sarsa_gradient_step(env_id: str, optimizer_kwargs: dict[str, Any]) -> Callable[[], None]:
@@ -82,8 +83,9 @@ def sarsa_gradient_step(env_id: str, optimizer_kwargs: dict[str, Any]) -> Callab
     policy_kwargs = dict(net_arch=NET_ARCH, optimizer_kwargs=optimizer_kwargs)
     model = NStepSARSA("MlpPolicy", env_id, policy_kwargs=policy_kwargs, seed=0, device="cpu")
     observations = observation_batch(model, BATCH_SIZE)
-    actions = th.randint(int(model.action_space.n), (BATCH_SIZE, 1))
-    targets = th.randn(BATCH_SIZE)
+    rng = np.random.default_rng(0)
+    actions = rng.integers(int(model.action_space.n), size=BATCH_SIZE)
+    targets = rng.standard_normal(BATCH_SIZE).astype(np.float32)
 
     def step() -> None:
         model._gradient_step(observations, actions, targets)
@@ -94,7 +96,7 @@ def sarsa_gradient_step(env_id: str, optimizer_kwargs: dict[str, Any]) -> Callab
 def reinforce_samplers(env_id: str, n_envs: int) -> dict[str, Callable[[], th.Tensor]]:
     """:return: SB3's sampling and REINFORCE's, of the actions of ``n_envs`` observations, without gradient"""
     model = REINFORCE("MlpPolicy", env_id, policy_kwargs=dict(net_arch=NET_ARCH), seed=0, device="cpu")
-    observations, policy = observation_batch(model, n_envs), model.policy
+    observations, policy = th.as_tensor(observation_batch(model, n_envs)), model.policy
 
     @th.no_grad()
     def sb3() -> th.Tensor:
@@ -107,34 +109,37 @@ def reinforce_samplers(env_id: str, n_envs: int) -> dict[str, Callable[[], th.Te
     return {"SB3: get_distribution(obs).get_actions()": sb3, "REINFORCEPolicy.sample_actions(obs)": ours}
 
 
+#: The policy_kwargs that make MlpPolicy's q̂ LinearPolicy's (one layer, no bias, weights 0, plain SGD)
+MLP_AS_LINEAR: dict[str, Any] = dict(net_arch=[], with_bias=False, weight_init=0.0, optimizer_class=th.optim.SGD)
+
+
 def linear_sgd_updates() -> dict[str, Callable[[], None]]:
     """
     :return: one per-step update of a linear q̂ over tile coding with plain SGD: through autograd, applied directly to
         the dense features, and over the active tiles (the observation's tiles cached, as the rollout leaves them)
     """
-    tiles = dict(n_tilings=8, tiles_per_dim=8, low=(-1.2, -0.07), high=(0.5, 0.07))
-    policy_kwargs = dict(
-        net_arch=[], with_bias=False, weight_init=0.0, optimizer_class=th.optim.SGD,
-        features_extractor_class=TileCoding, features_extractor_kwargs=tiles,
-    )  # fmt: skip
+    features = dict(
+        features_extractor_class=TileCoding,
+        features_extractor_kwargs=dict(n_tilings=8, tiles_per_dim=8, low=(-1.2, -0.07), high=(0.5, 0.07)),
+    )
     updates: dict[str, Callable[[], None]] = {}
     variants = (
-        ("autograd + torch.optim.SGD", "autograd"),
-        ("applied directly to the dense features", "dense"),
-        ("over the active tiles (sb3_classic's)", "tiles"),
+        ("autograd + torch.optim.SGD", "MlpPolicy"),
+        ("applied directly to the dense features", "LinearPolicy"),
+        ("over the active tiles (sb3_classic's)", "LinearPolicy"),
     )
-    for variant, path in variants:
+    for variant, policy in variants:
+        # MlpPolicy: the same q̂ (one layer, no bias, weights 0) with plain SGD, through autograd
+        policy_kwargs = features if policy == "LinearPolicy" else dict(features, **MLP_AS_LINEAR)
         model = NStepSARSA(
-            "MlpPolicy", LINEAR_ENV_ID, learning_rate=0.3 / 8, update_mode="per_step", policy_kwargs=policy_kwargs,
+            policy, LINEAR_ENV_ID, learning_rate=0.3 / 8, update_mode="per_step", policy_kwargs=policy_kwargs,
             seed=0, device="cpu",
         )  # fmt: skip
-        if path != "tiles":
-            model._tile_sgd = None  # (set when the model is built and at each learn(): this one never learns)
-        if path == "autograd":
-            model._plain_sgd_linear_layer = lambda: None  # type: ignore[method-assign]
+        if variant.startswith("applied directly"):
+            model.policy.__dict__["tile_coding"] = None  # (LinearPolicy's dense update)
         # One transition: an observation, its action and its target (the weights move at every call, as in training)
         updates[variant] = functools.partial(
-            model._gradient_step, observation_batch(model, 1), th.tensor([[1]]), th.tensor([-3.0])
+            model._gradient_step, observation_batch(model, 1), np.array([1]), np.array([-3.0], dtype=np.float32)
         )  # type: ignore[assignment]
     return updates
 

@@ -175,7 +175,8 @@ def make_model(setting: Setting, seed: int) -> NStepSARSA | REINFORCE:
         random_walk = setting.task == "random_walk"
         # n-step SARSA of §10.2, one update per step (per_step, train_freq=1), ε = 0 (greedy, ties broken at random)
         return NStepSARSA(
-            "MlpPolicy",
+            # q̂ = wᵀx(s, a) with the book's SGD update, weights 0, no bias (LinearPolicy's defaults)
+            "LinearPolicy",
             # gym.make(): given the id, SB3 first asks for render_mode="rgb_array", which these envs do not offer (a warning)
             gym.make("sb3_classic/RandomWalk19-v0" if random_walk else "sb3_classic/MountainCarNoLimit-v0"),
             learning_rate=setting.alpha,
@@ -186,7 +187,7 @@ def make_model(setting: Setting, seed: int) -> NStepSARSA | REINFORCE:
             gamma=1.0,
             exploration_initial_eps=0.0,
             exploration_final_eps=0.0,
-            policy_kwargs=linear_sgd(**({} if random_walk else MOUNTAIN_CAR_FEATURES)),
+            policy_kwargs={} if random_walk else MOUNTAIN_CAR_FEATURES,
             seed=seed,
             device="cpu",
         )

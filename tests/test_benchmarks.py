@@ -43,6 +43,7 @@ from sb3_classic import NStepSARSA
 from sb3_classic.harness import pool, runner
 from sb3_classic.harness.common import RunSpec, code_versions, register_algorithms
 from sb3_classic.harness.runner import RUN_FILE, episodes_from_monitors, run_one
+from sb3_classic.sarsa.policies import LinearQPolicy
 
 SPEC = RunSpec(
     algo="reinforce",
@@ -382,8 +383,8 @@ def test_hot_paths_command_line(tmp_path: Path) -> None:
     assert all(float(row[3]) > 0 for row in rows + linear)
     # Each variant's model takes its own path
     models = [update.func.__self__ for update in hot_paths.linear_sgd_updates().values()]  # type: ignore[attr-defined]
-    assert [model._plain_sgd_linear_layer() is not None for model in models] == [False, True, True]
-    assert [model._tile_sgd is not None for model in models] == [False, False, True]
+    assert [isinstance(model.policy, LinearQPolicy) for model in models] == [False, True, True]
+    assert [getattr(model.policy, "tile_coding", None) is not None for model in models] == [False, False, True]
 
 
 def test_run_one_trains_once_and_caches(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

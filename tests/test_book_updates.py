@@ -21,7 +21,9 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 from stable_baselines3.dqn.policies import QNetwork
 
 from sb3_classic import REINFORCE, NStepSARSA, TileCoding
-from sb3_classic.sarsa.policies import SARSAPolicy
+from sb3_classic.common import returns
+from sb3_classic.sarsa import nstep_sarsa
+from sb3_classic.sarsa.policies import LinearQPolicy, SARSAPolicy
 
 N_ACTIONS, N_FEATURES = 3, 4
 # Episodes of 1 to 9 steps: shorter and longer than n, and a one-step episode
@@ -230,11 +232,12 @@ def test_tabular_sarsa_on_cliff_walking_is_the_books(expected: bool) -> None:
     [dict(n_steps=1), dict(n_steps=3, expected_sarsa=True), dict(n_steps=2, exploration_schedule="linear")],
     ids=["n=1", "n=3 expected", "n=2 linear eps"],
 )
-def test_the_book_loops_update_is_train_to_the_last_bit(kwargs: dict[str, Any], monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_book_loops_windows_give_train_the_same_bits(kwargs: dict[str, Any], monkeypatch: pytest.MonkeyPatch) -> None:
     """
-    The per-step loop's own update between episode ends (``_book_loop_step``, for the per-step mode's speed) against
-    the general ``train()`` it stands for: a 2×32 MLP with Adam and time-limit truncations (CartPole cut at 30 steps),
-    the same parameters bit for bit and the same log.
+    With one env and an update every step (the book's loop), ``completed_windows`` computes each update's windows one
+    at a time, for the per-step mode's speed: training against the windows of ``nstep_windows`` over the buffer, a 2×32
+    MLP with Adam and time-limit truncations (CartPole cut at 30 steps), the same parameters bit for bit and the same
+    log.
     """
 
     def run() -> tuple[list[th.Tensor], dict[str, Any]]:
@@ -246,18 +249,17 @@ def test_the_book_loops_update_is_train_to_the_last_bit(kwargs: dict[str, Any], 
         model.learn(600)
         return [p.detach().clone() for p in model.policy.parameters()], dict(model.logger.name_to_value)
 
-    calls = {True: 0, False: 0}
-    book_step = NStepSARSA._book_loop_step
+    calls = [0]
+    one_at_a_time = returns._windows_one_at_a_time
 
-    def counted(self: NStepSARSA) -> bool:
-        done = book_step(self)
-        calls[done] += 1
-        return done
+    def counted(*args: Any) -> Any:
+        calls[0] += 1
+        return one_at_a_time(*args)
 
-    monkeypatch.setattr(NStepSARSA, "_book_loop_step", counted)
+    monkeypatch.setattr(returns, "_windows_one_at_a_time", counted)
     fast, fast_log = run()
-    assert calls[True] > 300, "the book loop's update must be the one taken between episode ends"
-    monkeypatch.setattr(NStepSARSA, "_book_loop_step", lambda self: False)
+    assert calls[0] > 300, "the book loop's windows must be computed one at a time"
+    monkeypatch.setattr(nstep_sarsa, "completed_windows", returns._windows_vectorised)
     general, general_log = run()
     assert all(th.equal(a, b) for a, b in zip(fast, general, strict=True))
     assert fast_log == general_log
@@ -266,11 +268,17 @@ def test_the_book_loops_update_is_train_to_the_last_bit(kwargs: dict[str, Any], 
 MOUNTAIN_CAR_TILES = dict(n_tilings=8, tiles_per_dim=8, low=(-1.2, -0.07), high=(0.5, 0.07))
 
 
-def tile_coded_sarsa(with_bias: bool = False, hash_size: int | None = None, **kwargs: Any) -> NStepSARSA:
-    """:return: per-step linear SARSA with plain SGD over tile coding on Mountain Car (the book's Figs 10.1–10.4)"""
+def tile_coded_sarsa(
+    with_bias: bool = False, hash_size: int | None = None, policy: str = "LinearPolicy", **kwargs: Any
+) -> NStepSARSA:
+    """
+    :param policy: ``"LinearPolicy"`` (its own SGD update) or ``"MlpPolicy"`` (the same q̂ through autograd and
+        ``torch.optim.SGD``)
+    :return: per-step linear SARSA with plain SGD over tile coding on Mountain Car (the book's Figs 10.1–10.4)
+    """
     tiles = MOUNTAIN_CAR_TILES | dict(hash_size=hash_size)
     return NStepSARSA(
-        "MlpPolicy", "MountainCar-v0", learning_rate=0.3 / 8, gradient_steps=1, update_mode="per_step", gamma=1.0,
+        policy, "MountainCar-v0", learning_rate=0.3 / 8, gradient_steps=1, update_mode="per_step", gamma=1.0,
         exploration_initial_eps=0.1, exploration_final_eps=0.1,
         policy_kwargs=linear_sgd(
             with_bias=with_bias, weight_init=0.0, features_extractor_class=TileCoding, features_extractor_kwargs=tiles
@@ -280,30 +288,25 @@ def tile_coded_sarsa(with_bias: bool = False, hash_size: int | None = None, **kw
 
 
 def _linear_sarsa_runs(
-    make: Any, steps: int, direct: str, switched_off: tuple[str, ...], monkeypatch: pytest.MonkeyPatch
+    kwargs: dict[str, Any], steps: int, direct: str, monkeypatch: pytest.MonkeyPatch
 ) -> tuple[int, list[tuple[Any, ...]]]:
     """
-    Train ``make()`` for ``steps`` env steps twice: as it comes, counting the calls of the update ``direct``, then
-    with the methods ``switched_off`` returning None (the linear update through autograd and ``torch.optim.SGD``).
+    Train ``tile_coded_sarsa(**kwargs)`` for ``steps`` env steps twice: with ``"LinearPolicy"``, counting the calls of
+    its update ``direct``, then with ``"MlpPolicy"`` (the linear update through autograd and ``torch.optim.SGD``).
 
     :return: the direct updates made in the first run, and each run's parameters and last log
     """
     calls = [0]
-    update = getattr(NStepSARSA, direct)
+    update = getattr(LinearQPolicy, direct)
 
-    def counted(self: NStepSARSA, *args: Any) -> Any:
+    def counted(self: LinearQPolicy, *args: Any) -> Any:
         calls[0] += 1
         return update(self, *args)
 
+    monkeypatch.setattr(LinearQPolicy, direct, counted)
     runs = []
-    for off in (False, True):
-        if off:
-            monkeypatch.setattr(NStepSARSA, direct, update)
-            for name in switched_off:
-                monkeypatch.setattr(NStepSARSA, name, lambda self: None)
-        else:
-            monkeypatch.setattr(NStepSARSA, direct, counted)
-        model = make()
+    for policy in ("LinearPolicy", "MlpPolicy"):
+        model = tile_coded_sarsa(policy=policy, **kwargs)
         model.learn(steps)
         runs.append(([p.detach().clone() for p in model.policy.parameters()], dict(model.logger.name_to_value)))
     return calls[0], runs
@@ -318,15 +321,13 @@ def test_direct_linear_sgd_update_is_autograds_to_the_last_bit(
     kwargs: dict[str, Any], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """
-    The per-step mode's update of a linear q̂ with plain SGD on dense features, applied to W_a without autograd
-    (for the per-step mode's speed), gives the parameters and the log of autograd and ``torch.optim.SGD`` bit for bit:
+    ``LinearPolicy``'s update of a linear q̂ on dense features, applied to W_a without autograd (for the per-step
+    mode's speed), gives the parameters and the log of autograd and ``torch.optim.SGD`` bit for bit:
     over tile coding's dense features on Mountain Car (its sparse path switched off), with a bias, Expected SARSA and
     updates of several transitions at once.
     """
-    monkeypatch.setattr(NStepSARSA, "_tile_coded_q", lambda self: None)
-    direct_updates, (fast, general) = _linear_sarsa_runs(
-        lambda: tile_coded_sarsa(**kwargs), 1200, "_linear_sgd_step", ("_plain_sgd_linear_layer",), monkeypatch
-    )
+    monkeypatch.setattr(LinearQPolicy, "_over_tiles", lambda self: None)
+    direct_updates, (fast, general) = _linear_sarsa_runs(kwargs, 1200, "sgd_step", monkeypatch)
     assert direct_updates > 1000
     assert all(th.equal(a, b) for a, b in zip(fast[0], general[0], strict=True))
     assert fast[1] == general[1]
@@ -341,14 +342,12 @@ def test_tile_coded_sgd_update_is_autograds_to_float32_rounding(
 ) -> None:
     """
     Over tile coding, the rollout's q̂ and the per-step update go over the active tiles, as the book's code does:
-    q̂ = Σ_t W[a, i_t(s)], and α[G − q̂] added to each active tile's weight (``_tile_q_values``, ``_tile_sgd_step``).
+    q̂ = Σ_t W[a, i_t(s)], and α[G − q̂] added to each active tile's weight (``LinearQPolicy.q_values``, ``sgd_step``).
     The same learning as the dense features through autograd and ``torch.optim.SGD``, to float32 rounding (the sum's
     order differs), over 1,200 steps of Mountain Car: with a bias, Expected SARSA, several transitions at once, and
     hashed tiles that collide (a tile met by two tilings gets the step twice, as its feature is 2).
     """
-    direct_updates, (fast, general) = _linear_sarsa_runs(
-        lambda: tile_coded_sarsa(**kwargs), 1200, "_tile_sgd_step", ("_tile_coded_q", "_plain_sgd_linear_layer"), monkeypatch
-    )
+    direct_updates, (fast, general) = _linear_sarsa_runs(kwargs, 1200, "_tile_sgd_step", monkeypatch)
     assert direct_updates > 300 if kwargs.get("train_freq") else direct_updates > 1000
     for a, b in zip(fast[0], general[0], strict=True):
         np.testing.assert_allclose(a.numpy(), b.numpy(), rtol=1e-5, atol=1e-5)
@@ -370,42 +369,46 @@ def test_tile_q_values_are_the_dense_forward_pass() -> None:
     obs = (rng.uniform(-1.3, 0.6, (200, 2)) * [1, 0.07 / 0.6]).astype(np.float32)
     for with_bias, hash_size in ((False, None), (True, None), (True, 64)):
         model = tile_coded_sarsa(with_bias=with_bias, hash_size=hash_size)
-        assert model._tile_coded is not None
-        assert model._tile_sgd is not None
+        assert isinstance(model.policy, LinearQPolicy)
+        assert model.policy.tile_coding is not None
         with th.no_grad():
             for parameter in model.policy.q_net.parameters():
                 parameter.normal_()
             dense = model.policy.q_net(th.as_tensor(obs)).numpy()
-        np.testing.assert_allclose(model._tile_q_values(*model._tile_coded, obs), dense, rtol=1e-5, atol=1e-5)
-    # Not over features with parameters, Adam (the rollout's q̂ only), or other features
-    hidden = NStepSARSA("MlpPolicy", "MountainCar-v0", policy_kwargs=dict(net_arch=[8], features_extractor_class=TileCoding))
-    assert hidden._tile_coded is None
-    adam = NStepSARSA("MlpPolicy", "MountainCar-v0", policy_kwargs=dict(net_arch=[], features_extractor_class=TileCoding))
-    assert adam._tile_coded is not None
-    assert adam._tile_sgd is None
-    assert NStepSARSA("MlpPolicy", "MountainCar-v0", policy_kwargs=linear_sgd())._tile_coded is None
+        np.testing.assert_allclose(model.policy.q_values(obs), dense, rtol=1e-5, atol=1e-5)
+    # Other features: the dense forward pass
+    dense_model = NStepSARSA("LinearPolicy", "MountainCar-v0")
+    assert isinstance(dense_model.policy, LinearQPolicy)
+    assert dense_model.policy.tile_coding is None
+    np.testing.assert_allclose(dense_model.policy.q_values(obs), dense_model.policy.q_net(th.as_tensor(obs)).detach().numpy())
 
 
 @pytest.mark.parametrize(
-    "kwargs",
+    ("kwargs", "match"),
     [
-        dict(policy_kwargs=linear_sgd(optimizer_kwargs=dict(momentum=0.9))),
-        dict(policy_kwargs=linear_sgd(optimizer_kwargs=dict(weight_decay=1e-3))),
-        dict(policy_kwargs=linear_sgd(), max_grad_norm=1.0),
-        dict(policy_kwargs=linear_sgd(), loss_function="huber"),
-        dict(policy_kwargs=dict(net_arch=[], with_bias=False)),  # Adam
-        dict(policy_kwargs=dict(net_arch=[8], optimizer_class=th.optim.SGD)),  # not linear
+        (dict(policy_kwargs=dict(optimizer_kwargs=dict(momentum=0.9))), "momentum"),
+        (dict(policy_kwargs=dict(optimizer_kwargs=dict(weight_decay=1e-3))), "weight_decay"),
+        (dict(max_grad_norm=1.0), "max_grad_norm"),
+        (dict(loss_function="huber"), "loss_function"),
+        (dict(policy_kwargs=dict(optimizer_class=th.optim.Adam)), "optimizer_class"),
+        (dict(policy_kwargs=dict(net_arch=[8])), "net_arch"),
     ],
     ids=["momentum", "weight decay", "clipping", "huber", "adam", "hidden layer"],
 )
-def test_direct_linear_update_only_where_it_is_sgds(kwargs: dict[str, Any]) -> None:
-    """Anything beyond a linear q̂, plain SGD and the MSE loss goes through autograd and the optimizer."""
-    assert NStepSARSA("MlpPolicy", vec(FeatureEpisodes(LENGTHS)), **kwargs)._plain_sgd_linear_layer() is None
-    plain = NStepSARSA("MlpPolicy", vec(FeatureEpisodes(LENGTHS)), policy_kwargs=linear_sgd())
-    assert plain._plain_sgd_linear_layer() is plain.policy.q_net.q_net[0]
+def test_linear_policy_refuses_what_its_update_is_not(kwargs: dict[str, Any], match: str) -> None:
+    """LinearPolicy's update is plain SGD on ½(G − q̂)² of a linear q̂: anything else is an error naming the argument."""
+    with pytest.raises(ValueError, match=match):
+        NStepSARSA("LinearPolicy", vec(FeatureEpisodes(LENGTHS)), **kwargs)
+    # The same q̂ and options through autograd and the optimizer
+    assert not isinstance(
+        NStepSARSA("MlpPolicy", vec(FeatureEpisodes(LENGTHS)), policy_kwargs=linear_sgd()).policy, LinearQPolicy
+    )
+    plain = NStepSARSA("LinearPolicy", vec(FeatureEpisodes(LENGTHS)), train_freq=1, update_mode="per_step")
+    assert plain.policy.layer is plain.policy.q_net.q_net[0]
     # A q̂ whose layers were replaced after construction is not updated through the old layer
     plain.policy.q_net.q_net = th.nn.Sequential(th.nn.Linear(N_FEATURES, N_ACTIONS, bias=False))
-    assert plain._plain_sgd_linear_layer() is None
+    with pytest.raises(RuntimeError, match="replaced"):
+        plain.learn(20)
 
 
 def test_batch_mode_differs_from_the_book_at_episode_ends() -> None:
@@ -554,9 +557,10 @@ def test_per_step_and_normalize_advantage_are_refused() -> None:
 
 def test_direct_updates_only_where_they_are_what_autograd_would_do() -> None:
     """
-    The direct paths stand for q̂ = W x(s) and autograd's SGD step; they are not taken where those are something else:
-    a TileCoding subclass with features of its own (its q̂ was 8× the policy's, its weights went to NaN), a QNetwork
-    subclass with its own forward (from make_q_net), a frozen bias (it was updated), or a layer outside the optimizer.
+    LinearPolicy's update stands for q̂ = W x(s) and autograd's SGD step; it is not made where those are something else:
+    over a TileCoding subclass with features of its own the dense features are used (over the tiles, its q̂ would be
+    8× the policy's), a QNetwork subclass with its own forward (from make_q_net) is refused, and a frozen bias is
+    left alone, over tiles and dense features.
     """
 
     class ScaledTiles(TileCoding):
@@ -573,30 +577,35 @@ def test_direct_updates_only_where_they_are_what_autograd_would_do() -> None:
             q_net.__class__ = HalfQ
             return q_net
 
+    class HalfLinearPolicy(LinearQPolicy):
+        def make_q_net(self) -> QNetwork:
+            q_net = super().make_q_net()
+            q_net.__class__ = HalfQ
+            return q_net
+
     tiles = dict(features_extractor_class=TileCoding, features_extractor_kwargs=MOUNTAIN_CAR_TILES)
     scaled_tiles = dict(features_extractor_class=ScaledTiles, features_extractor_kwargs=MOUNTAIN_CAR_TILES)
-    scaled = NStepSARSA("MlpPolicy", "MountainCar-v0", policy_kwargs=linear_sgd(**scaled_tiles), device="cpu")
-    assert scaled._tile_coded is None
-    assert scaled._plain_sgd_linear_layer() is not None  # (its dense features, through the policy's forward)
-    half = NStepSARSA(HalfPolicy, "MountainCar-v0", policy_kwargs=linear_sgd(**tiles), device="cpu")
-    assert half.policy.linear_layer is None
-    assert half._tile_coded is None
-    assert half._plain_sgd_linear_layer() is None
+    scaled = NStepSARSA("LinearPolicy", "MountainCar-v0", policy_kwargs=scaled_tiles, device="cpu")
+    assert isinstance(scaled.policy, LinearQPolicy)
+    assert scaled.policy.tile_coding is None  # (its dense features, through its own forward)
+    with pytest.raises(TypeError, match="own forward"):
+        NStepSARSA(HalfLinearPolicy, "MountainCar-v0", policy_kwargs=tiles, device="cpu")
+    assert (
+        NStepSARSA(HalfPolicy, "MountainCar-v0", policy_kwargs=linear_sgd(**tiles), device="cpu").policy.q_net.__class__
+        is HalfQ
+    )
 
-    frozen = tile_coded_sarsa(with_bias=True)
-    layer = frozen.policy.linear_layer
-    assert layer is not None
-    assert layer.bias is not None
-    bias = layer.bias
-    bias.requires_grad_(False)
-    with th.no_grad():
-        bias.fill_(0.25)
-    frozen.learn(500)
-    assert frozen._tile_sgd is None
-    assert frozen._plain_sgd_linear_layer() is None
-    np.testing.assert_array_equal(bias.detach().numpy(), np.full(3, 0.25, dtype=np.float32))
-    assert layer.weight.abs().max() > 0.1, "the weights, not frozen, should have moved"
-
-    outside = tile_coded_sarsa()
-    outside.policy.optimizer = th.optim.SGD([th.nn.Parameter(th.zeros(1))], lr=0.1)
-    assert outside._plain_sgd_linear_layer() is None
+    for over_tiles in (True, False):
+        frozen = tile_coded_sarsa(with_bias=True)
+        assert isinstance(frozen.policy, LinearQPolicy)
+        if not over_tiles:
+            frozen.policy.__dict__["tile_coding"] = None
+        layer = frozen.policy.layer
+        assert layer.bias is not None
+        bias = layer.bias
+        bias.requires_grad_(False)
+        with th.no_grad():
+            bias.fill_(0.25)
+        frozen.learn(500)
+        np.testing.assert_array_equal(bias.detach().numpy(), np.full(3, 0.25, dtype=np.float32))
+        assert layer.weight.abs().max() > 0.1, "the weights, not frozen, should have moved"

@@ -63,7 +63,9 @@ def test_targets_bootstrap_from_the_target_network() -> None:
     assert batch is not None
     data = model.rollout_buffer.get()
     expected, _ = nstep_targets(data.rewards, data.dones, np.zeros_like(data.rewards), model.gamma, model.n_steps)
-    np.testing.assert_allclose(batch.targets.numpy(), expected[batch.trained], rtol=1e-6)
+    # The batch: each env's first n_trained pending transitions, in time order
+    trained = data.pending & (np.cumsum(data.pending, axis=0) <= batch.n_trained)
+    np.testing.assert_allclose(batch.targets, expected[trained], rtol=1e-6)
     # ... which the online network would not give
     assert th.equal(flat(target), th.zeros_like(flat(target)))
     assert flat(model.policy.q_net).abs().sum() > 0
@@ -115,7 +117,7 @@ def test_bad_target_arguments(name: str, value: float) -> None:
 def test_the_average_follows_q_after_every_update_and_leaves_training_alone(update_mode: str) -> None:
     """w̄ ← τw + (1 − τ)w̄ after each update (both modes, the per-step loop's own update included), from q̂'s initial
     weights; the online weights and the ε-greedy actions are those of a run without the average, bit for bit."""
-    # The per-step loop's own update (_book_loop_step) needs one env and train_freq=1
+    # The book's loop: one env and train_freq=1
     tau = 0.2
     settings: dict[str, Any] = dict(update_mode=update_mode)
     if update_mode == "per_step":
@@ -126,15 +128,15 @@ def test_the_average_follows_q_after_every_update_and_leaves_training_alone(upda
     assert average is not None
     expected = flat(model.policy.q_net)
     n_updates = [0]
-    update_average = model._update_average
+    move_copies = model._move_copies
 
     def recorded() -> None:
         nonlocal expected
-        update_average()
+        move_copies()
         expected = tau * flat(model.policy.q_net) + (1 - tau) * expected
         n_updates[0] += 1
 
-    model._update_average = recorded  # type: ignore[method-assign]
+    model._move_copies = recorded  # type: ignore[method-assign]
     model.learn(200)
     # batch: an update every 16 env steps (8 per env, 2 envs); per step: one after almost every env step
     assert n_updates[0] >= (10 if update_mode == "batch" else 150)

@@ -193,8 +193,8 @@ def test_box_actions_of_several_dimensions_keep_their_shape(shape: tuple[int, ..
     # One env: the batch is its first episode(s), in the order the env received them, flattened as SB3's buffer does
     if n_envs == 1:
         received = np.array(envs[0].received[: len(first.actions)], dtype=np.float32).reshape(len(first.actions), -1)
-        np.testing.assert_array_equal(first.actions.numpy(), received)
-    log_prob = model.policy.get_distribution(first.observations).log_prob(first.actions)
+        np.testing.assert_array_equal(first.actions, received)
+    log_prob = model.policy.get_distribution(th.as_tensor(first.observations)).log_prob(th.as_tensor(first.actions))
     assert log_prob.shape == (len(first.targets),)
     observations = np.stack([envs[0].observation_space.sample() for _ in range(4)])
     assert model.predict(observations, deterministic=True)[0].shape == (4, *shape)

@@ -466,8 +466,8 @@ def test_exported_policy_acts_as_predict(hash_size: int | None) -> None:
     tiles = dict(n_tilings=8, tiles_per_dim=8, low=(-1.2, -0.07), high=(0.5, 0.07), hash_size=hash_size)
     kwargs = dict(features_extractor_class=TileCoding, features_extractor_kwargs=tiles, net_arch=[])
     model = NStepSARSA("MlpPolicy", "MountainCar-v0", policy_kwargs=kwargs, seed=0, device="cpu")
-    layer = model.policy.linear_layer
-    assert layer is not None
+    layer = model.policy.q_net.q_net[0]
+    assert isinstance(layer, th.nn.Linear)
     with th.no_grad():
         layer.weight.normal_(generator=th.Generator().manual_seed(0))
     observations = th.as_tensor(np.random.default_rng(0).uniform((-1.2, -0.07), (0.6, 0.07), (100, 2)), dtype=th.float32)

@@ -155,9 +155,16 @@ def test_sarsa_trains_every_transition_once_on_its_full_nstep_target(
     assert expected_targets, "the run must produce complete targets"
 
     trained_q = np.concatenate(
-        [model.policy.q_net(b.observations).gather(1, b.actions).flatten().detach().numpy() for b in batches]
+        [
+            model.policy.q_net(th.as_tensor(b.observations))
+            .gather(1, th.as_tensor(b.actions)[:, None])
+            .flatten()
+            .detach()
+            .numpy()
+            for b in batches
+        ]
     )
-    trained_targets = np.concatenate([b.targets.numpy() for b in batches])
+    trained_targets = np.concatenate([b.targets for b in batches])
     assert_same_rows([trained_q, trained_targets], [np.array(expected_q), np.array(expected_targets)])
 
 
@@ -191,9 +198,9 @@ def test_reinforce_trains_every_step_of_each_episode_once_on_its_return(n_episod
         (values_, returns_, steps)
         for batch in batches
         for values_, returns_, steps in zip(
-            model.policy.predict_values(batch.observations).flatten().detach().numpy(),
-            batch.targets.numpy(),
-            batch.episode_steps.numpy(),
+            model.policy.predict_values(th.as_tensor(batch.observations)).flatten().detach().numpy(),
+            batch.targets,
+            batch.episode_steps,
             strict=True,
         )
     ]

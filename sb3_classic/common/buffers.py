@@ -30,17 +30,20 @@ class TrajectorySamples(NamedTuple):
 
 class TrainingBatch(NamedTuple):
     """
-    The transitions of one update, as tensors, with what they are trained towards.
-
-    ``trained`` locates them in the buffer's ``get()`` arrays (a mask, or with one env a count of its first pending
-    transitions), to mark them trained after the update.
+    The transitions of one update, with what they are trained towards, in time order, as arrays of the buffer (the
+    algorithm makes tensors of what its update needs).
     """
 
-    observations: th.Tensor | dict[str, th.Tensor]
-    actions: th.Tensor
-    targets: th.Tensor
-    episode_steps: th.Tensor
-    trained: np.ndarray | int
+    #: S_t, shape (B, *obs_shape) (a dict of such arrays for ``Dict`` observations)
+    observations: Observations
+    #: A_t as the buffer stores them, shape (B, *action_shape)
+    actions: np.ndarray
+    #: the targets (G_t, G_{t:t+n}), shape (B,), float32
+    targets: np.ndarray
+    #: t, the step of each within its episode, shape (B,)
+    episode_steps: np.ndarray
+    #: how many of each env's first pending transitions they are, shape (n_envs,): marked trained after the update
+    n_trained: np.ndarray
 
 
 def select(observations: Observations, index: Any) -> Observations:
@@ -212,28 +215,21 @@ class TrajectoryBuffer(BaseBuffer):
             pending=np.arange(self.pos)[:, None] >= self.start,
         )
 
-    def mark_trained(self, trained: np.ndarray | int) -> None:
+    def mark_trained(self, n_trained: np.ndarray) -> None:
         """
-        Record that the algorithm trained on ``trained`` (a prefix of each env's pending transitions) and drop
-        the rows that no env needs any more.
+        Record that the algorithm trained on the first ``n_trained[env]`` pending transitions of each env, and drop the
+        rows that no env needs any more.
 
-        :param trained: boolean mask of shape (pos, n_envs); with one env, the number of its first pending
-            transitions will do (no mask to build and check: the per-step mode calls this every env step)
+        :param n_trained: a count per env, shape (n_envs,)
         """
-        if isinstance(trained, int):
-            assert self.n_envs == 1, "a count of trained transitions needs one env (a mask otherwise)"
-            # (Python ints: NumPy's calls on the one-element array cost more than the rest of this, every env step)
-            start = int(self.start[0]) + trained
-            assert start <= self.pos, "trained: more transitions than pending"
+        if self.n_envs == 1:
+            # (Python ints: NumPy's calls on one-element arrays cost more than the rest of this, at every env step of
+            # the per-step mode)
+            start = int(self.start[0]) + int(n_trained[0])
             self.start[0] = start
             self._drop_rows(start)
             return
-        start = self.start + np.count_nonzero(trained, axis=0)
-        rows = np.arange(self.pos)[:, None]
-        assert (trained == ((rows >= self.start) & (rows < start))).all(), (
-            "trained must be the first pending transitions of each env (each once, in time order)"
-        )
-        self.start = start
+        self.start = self.start + n_trained
         self._drop_rows(int(self.start.min()))
 
     def _drop_rows(self, n_rows: int) -> None:

@@ -179,8 +179,132 @@ def nstep_targets(
     """
     windows = nstep_windows(rewards, dones, gamma, n_steps)
     bootstrap = np.take_along_axis(next_values, windows.stop_rows, axis=0)
-    targets = windows.reward_sums + windows.bootstrap_discounts * bootstrap.astype(np.float32)
+    targets = nstep_returns(windows.reward_sums, windows.bootstrap_discounts, bootstrap.astype(np.float32))
     return targets.astype(np.float32), windows.complete
+
+
+def nstep_returns(reward_sums: np.ndarray, bootstrap_discounts: np.ndarray, bootstrap: np.ndarray) -> np.ndarray:
+    """
+    :param reward_sums: R_{t+1} + γR_{t+2} + … + γ^{K−1}R_{t+K} of each window of K rewards, float32
+    :param bootstrap_discounts: γ^K of each, float32
+    :param bootstrap: the value each bootstraps from after its last reward (0 after a termination), float32
+    :return: G_{t:t+n} (S&B eq. 10.4), float32, of the arrays' shape
+    """
+    # G_{t:t+n} = R_{t+1} + γR_{t+2} + … + γ^{n−1}R_{t+n} + γ^n q̂(S_{t+n}, A_{t+n}) (S&B eq. 10.4)
+    return reward_sums + bootstrap_discounts * bootstrap
+
+
+class CompletedWindows(NamedTuple):
+    """
+    The n-step windows of the transitions not trained on yet whose targets are known, all of shape (B,), in time order
+    (row-major: step t of every env, then step t + 1): ``NStepWindows`` at those ``[rows, envs]``.
+    """
+
+    rows: np.ndarray  #: the step t of each transition (int64)
+    envs: np.ndarray  #: its env (int64)
+    stop_rows: np.ndarray  #: the step whose reward is its window's last (int64)
+    reward_sums: np.ndarray  #: R_{t+1} + γR_{t+2} + … over the window's rewards, float32
+    bootstrap_discounts: np.ndarray  #: γ^K for a window of K rewards (float32)
+
+
+def completed_windows(
+    rewards: np.ndarray, dones: np.ndarray, start: np.ndarray, gamma: float, n_steps: int
+) -> CompletedWindows:
+    """
+    The windows (S&B eq. 10.4) of every transition not trained on yet (``t >= start[env]``) whose target is known
+    (``NStepWindows.complete``). The pending transitions of an env complete in time order, so those returned are the
+    first pending ones of each env.
+
+    With one env and at most n + 1 pending steps (the book's loop: an update at every env step), each window is
+    computed alone (``nstep_window``): the same bits as ``nstep_windows``, whose arrays over the buffer would cost more
+    than the gradient step's own overhead at every env step.
+
+    :param rewards: R_{t+1}, shape (n_steps_stored, n_envs)
+    :param dones: whether the episode ended with step t, shape (n_steps_stored, n_envs)
+    :param start: the first step not trained on yet, per env, shape (n_envs,)
+    :param gamma: discount factor γ
+    :param n_steps: the n of n-step returns, n ≥ 1
+    :return: the windows (see ``CompletedWindows``), B = 0 if none is complete
+    """
+    length, n_envs = rewards.shape
+    if n_envs == 1 and length - int(start[0]) <= n_steps + 1:
+        return _windows_one_at_a_time(rewards, dones, int(start[0]), gamma, n_steps)
+    return _windows_vectorised(rewards, dones, start, gamma, n_steps)
+
+
+def _windows_one_at_a_time(rewards: np.ndarray, dones: np.ndarray, first: int, gamma: float, n_steps: int) -> CompletedWindows:
+    """``completed_windows`` of one env from step ``first`` on, each window computed alone (``nstep_window``)."""
+    discounts = gamma_powers(gamma, n_steps)
+    env_rewards, env_dones = rewards[:, 0], dones[:, 0]
+    if np.count_nonzero(env_dones[first:]):
+        # An episode ended: the pending transitions up to it complete together (the complete ones are a prefix)
+        windows = []
+        for t in range(first, len(rewards)):
+            window = nstep_window(env_rewards, env_dones, t, discounts, n_steps)
+            if not window.complete:
+                break
+            windows.append(window)
+    else:
+        # Without an episode end, G_{t:t+n} is known once step t+n has been taken (S_{t+n}, A_{t+n} stored)
+        windows = [nstep_window(env_rewards, env_dones, t, discounts, n_steps) for t in range(first, len(rewards) - n_steps)]
+    # (float32 values, exactly; one array of both columns)
+    pairs = [(window.reward_sum, window.bootstrap_discount) for window in windows]
+    sums_and_discounts = np.array(pairs, np.float32).reshape(-1, 2)
+    return CompletedWindows(
+        rows=np.arange(first, first + len(windows)),
+        envs=np.zeros(len(windows), dtype=np.int64),
+        stop_rows=np.array([window.stop_row for window in windows], dtype=np.int64),
+        reward_sums=sums_and_discounts[:, 0],
+        bootstrap_discounts=sums_and_discounts[:, 1],
+    )
+
+
+def _windows_vectorised(
+    rewards: np.ndarray, dones: np.ndarray, start: np.ndarray, gamma: float, n_steps: int
+) -> CompletedWindows:
+    """``completed_windows`` from ``nstep_windows`` over every stored step."""
+    windows = nstep_windows(rewards, dones, gamma, n_steps)
+    rows, envs = np.nonzero(windows.complete & (np.arange(len(rewards))[:, None] >= start))  # row-major: time order
+    return CompletedWindows(
+        rows=rows,
+        envs=envs,
+        stop_rows=windows.stop_rows[rows, envs],
+        reward_sums=windows.reward_sums[rows, envs],
+        bootstrap_discounts=windows.bootstrap_discounts[rows, envs],
+    )
+
+
+def sarsa_targets(
+    windows: CompletedWindows,
+    bootstrap: np.ndarray,
+    rewards: np.ndarray,
+    step_values: np.ndarray | None,
+    gamma: float,
+    td_lambda: float,
+) -> np.ndarray:
+    """
+    The targets of n-step SARSA's transitions: G_{t:t+n} (S&B eq. 10.4), or with λ < 1 the truncated λ-return
+    G^λ_{t:t+n} over the same window (eq. 12.9, ``truncated_lambda_returns``).
+
+    :param windows: the transitions' windows
+    :param bootstrap: the value each window bootstraps from after its last reward: q̂(S_{t+n}, A_{t+n}) (or the
+        ε-greedy expectation) while the episode goes on, 0 after a termination, the final state's value after a
+        time-limit truncation; shape (B,), float32
+    :param rewards: R_{t+1}, shape (n_steps_stored, n_envs) (λ < 1 only)
+    :param step_values: q̂(S_t, A_t) (or the expectation) of every stored step t, shape (n_steps_stored, n_envs):
+        what G^λ bootstraps from inside a window; None for λ = 1
+    :param gamma: discount factor γ
+    :param td_lambda: λ in [0, 1]
+    :return: the targets, shape (B,), float32
+    """
+    if td_lambda == 1.0:
+        return nstep_returns(windows.reward_sums, windows.bootstrap_discounts, bootstrap)
+    assert step_values is not None, "λ-returns bootstrap from the value after every step of a window"
+    # The value after each step k of a window: q̂(S_{k+1}, A_{k+1}), and its bootstrap after the window's last
+    next_values = np.zeros_like(step_values)
+    next_values[:-1] = step_values[1:]
+    next_values[windows.stop_rows, windows.envs] = bootstrap
+    return truncated_lambda_returns(rewards, next_values, windows.rows, windows.envs, windows.stop_rows, gamma, td_lambda)
 
 
 def truncated_lambda_returns(

@@ -225,11 +225,11 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
                 next_values[data.truncated] = self.policy.predict_values(final_obs).flatten().cpu().numpy()
         returns = discounted_returns(data.rewards, data.dones, next_values, self.gamma)
         return TrainingBatch(
-            observations=obs_as_tensor(select(data.observations, trained), self.device),
-            actions=th.as_tensor(self._distribution_actions(data.actions[trained]), device=self.device),
-            targets=th.as_tensor(returns[trained], device=self.device),
-            episode_steps=th.as_tensor(data.episode_steps[trained], device=self.device),
-            trained=trained,
+            observations=select(data.observations, trained),
+            actions=self._distribution_actions(data.actions[trained]),
+            targets=returns[trained],
+            episode_steps=data.episode_steps[trained],
+            n_trained=np.count_nonzero(trained, axis=0),
         )
 
     def _distribution_actions(self, actions: np.ndarray) -> np.ndarray:
@@ -308,16 +308,19 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         batch = self._training_batch()
         if batch is None:
             return
-        returns = batch.targets
+        observations = obs_as_tensor(batch.observations, self.device)
+        actions = th.as_tensor(batch.actions, device=self.device)
+        returns = th.as_tensor(batch.targets, device=self.device)
+        episode_steps = th.as_tensor(batch.episode_steps, device=self.device)
 
         # Per step: the book's loop over each episode's steps t = 0, …, T − 1, in the order they were taken (with
         # several envs, the episodes' steps interleave in time order)
         steps = []
         for chunk in self._update_slices(len(returns)):
-            observations = select(batch.observations, chunk)  # type: ignore[arg-type]
-            steps.append(self._gradient_step(observations, batch.actions[chunk], returns[chunk], batch.episode_steps[chunk]))  # type: ignore[arg-type]
+            chunk_observations = select(observations, chunk)  # type: ignore[arg-type]
+            steps.append(self._gradient_step(chunk_observations, actions[chunk], returns[chunk], episode_steps[chunk]))  # type: ignore[arg-type]
 
-        self.rollout_buffer.mark_trained(batch.trained)
+        self.rollout_buffer.mark_trained(batch.n_trained)
         self._n_updates += len(steps)
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         # Every episode in the buffer is held from its first step (t = 0)

@@ -1,4 +1,4 @@
 from sb3_classic.sarsa.nstep_sarsa import NStepSARSA
-from sb3_classic.sarsa.policies import CnnPolicy, MlpPolicy, MultiInputPolicy
+from sb3_classic.sarsa.policies import CnnPolicy, LinearPolicy, MlpPolicy, MultiInputPolicy
 
-__all__ = ["CnnPolicy", "MlpPolicy", "MultiInputPolicy", "NStepSARSA"]
+__all__ = ["CnnPolicy", "LinearPolicy", "MlpPolicy", "MultiInputPolicy", "NStepSARSA"]

@@ -7,33 +7,23 @@ import torch as th
 import torch.nn.functional as F
 from gymnasium import spaces
 from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import LinearSchedule, get_parameters_by_name, obs_as_tensor, polyak_update
 
 from sb3_classic.common.buffers import TrainingBatch, select
 from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
 from sb3_classic.common.returns import (
+    CompletedWindows,
+    completed_windows,
     epsilon_greedy_expectation,
-    gamma_powers,
     greedy_random_ties,
-    nstep_window,
-    nstep_windows,
-    truncated_lambda_returns,
+    sarsa_targets,
 )
 from sb3_classic.common.schedules import ExponentialDecay
-from sb3_classic.common.tile_coding import TileCoding
 from sb3_classic.common.utils import check_bool, check_choice, check_positive_int, check_range
-from sb3_classic.sarsa.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, SARSAPolicy
+from sb3_classic.sarsa.policies import CnnPolicy, LinearPolicy, LinearQPolicy, MlpPolicy, MultiInputPolicy, SARSAPolicy
 
 SelfNStepSARSA = TypeVar("SelfNStepSARSA", bound="NStepSARSA")
-
-
-class TileCodedQ(NamedTuple):
-    """A linear q̂ over tile features: its tile coder and its linear layer."""
-
-    extractor: TileCoding
-    layer: th.nn.Linear
 
 
 class RolloutQValues(NamedTuple):
@@ -95,13 +85,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
       other in time order (episode ends included), ``gradient_steps`` passes. With ``train_freq=1``, one env and
       plain SGD (``policy_kwargs=dict(optimizer_class=th.optim.SGD)``) this is the book's algorithm exactly:
       the box of §10.2, whose updates at the end of an episode are made one by one (τ = T − n + 1, …, T − 1).
-      For the book's linear methods (``net_arch=[]`` over features without parameters, plain SGD, the MSE loss, no
-      clipping) each such update W_a ← W_a + α[G − q̂]x(S_t) is applied to the weights directly, without autograd: the
-      same arithmetic, the same weights to the last bit, in under half the time. Over ``TileCoding`` (on the CPU)
-      the rollout's q̂ and this update (any plain-SGD update of one transition) go over the active tiles as the book's
-      code does, q̂ = Σ_t W[a, i_t(s)] and
-      α[G − q̂] added to each active tile's weight, without the dense features: the same values to float32 rounding
-      (the sum's order differs), several times faster.
+      The book's linear methods are ``policy="LinearPolicy"`` (``LinearQPolicy``): q̂(s, a, w) = W_a x(s) with its
+      own SGD update W_a ← W_a + α[G − q̂]x(S_t), without autograd (over ``TileCoding``, over the active tiles as the
+      book's code does).
 
     The targets of an update are computed with the weights at its start. With ``train_freq=1`` and one env, the
     transitions that complete together are those of an episode's end, whose targets do not bootstrap, so the
@@ -133,7 +119,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     whose per-env settings are better still); the seed report's per-step settings are ``train_freq=1``,
     ``gradient_steps=1``, ``n_steps=10`` (CartPole-v1) or 5 (Acrobot-v1), ``learning_rate=5e-4``.
 
-    :param policy: the policy model to use (``"MlpPolicy"``, ``"CnnPolicy"``, ``"MultiInputPolicy"``)
+    :param policy: the policy model to use (``"MlpPolicy"``, ``"CnnPolicy"``, ``"MultiInputPolicy"``, or
+        ``"LinearPolicy"``: the book's linear q̂ with its own SGD update, ``LinearQPolicy``)
     :param env: the environment to learn from (if registered in Gymnasium, can be str)
     :param learning_rate: learning rate α (a float or an SB3 schedule of the remaining progress)
     :param n_steps: the n of n-step returns (as DQN's ``n_steps``); the seed report's best: 10 on CartPole-v1,
@@ -195,6 +182,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         "MlpPolicy": MlpPolicy,
         "CnnPolicy": CnnPolicy,
         "MultiInputPolicy": MultiInputPolicy,
+        "LinearPolicy": LinearPolicy,
     }
     _network_arguments: ClassVar[dict[str, Callable[[Any], bool]]] = {
         "target_update_interval": lambda value: value is not None,
@@ -393,43 +381,20 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
                 DEFAULT_EXPLORATION_FRACTION if self.exploration_fraction is None else self.exploration_fraction,
             )
         self._update_exploration_rate()
-        self._find_tile_coding()
-
-    def _find_tile_coding(self) -> None:
-        """
-        Whether the rollout and the per-step update go over the active tiles (``_tile_coded_q``), found when the model is
-        built and at the start of each ``learn()`` (the policy's modules and optimizer could have been changed in
-        between), not at every env step.
-        """
-        #: q̂'s tile coder and linear layer, if q̂ is linear over tile features on the CPU (else None)
-        self._tile_coded = self._tile_coded_q()
-        #: the same, if that layer is also trained by plain SGD on the MSE loss (``_plain_sgd_linear_layer``)
-        self._tile_sgd = self._tile_coded if self._plain_sgd_linear_layer() is not None else None
-        #: the active tiles of the last observations, by their float32 bytes (``_active_tiles``)
-        self._tiles_cache: dict[bytes, np.ndarray] = {}
-
-    def _active_tiles(self, extractor: TileCoding, observations: np.ndarray) -> np.ndarray:
-        """
-        :param extractor: q̂'s tile coder
-        :param observations: a batch of observations, shape (batch, *obs_shape)
-        :return: their active tiles (``TileCoding.active_tiles_numpy`` of the observations cast to float32, as the
-            policy's ``preprocess_obs`` casts them). With one env, the tiles of the last n + 2 observations are kept:
-            the per-step update of S_t comes n steps after the rollout coded S_t to choose A_t, and the tiles are a
-            function of the observation's values alone
-        """
-        observations = observations.astype(np.float32, copy=False)
-        if self.n_envs != 1:
-            return extractor.active_tiles_numpy(observations)
-        key = observations.tobytes()
-        tiles = self._tiles_cache.get(key)
-        if tiles is None:
-            tiles = self._tiles_cache[key] = extractor.active_tiles_numpy(observations)
-            if len(self._tiles_cache) > self.n_steps + 2:
-                del self._tiles_cache[next(iter(self._tiles_cache))]  # the oldest
-        return tiles
 
     def _make_policy(self) -> BasePolicy:
         self._refuse_policy_kwargs_set_here(target_network="target_update_interval", averaged_network="averaging_tau")
+        if issubclass(self.policy_class, LinearQPolicy):
+            for name, value, plain in (
+                ("loss_function", self.loss_function, "mse"),
+                ("max_grad_norm", self.max_grad_norm, math.inf),
+            ):
+                if value not in (plain, None):
+                    raise ValueError(
+                        f"{name}={value!r}: LinearPolicy's update is plain SGD on ½(G − q̂)² (S&B eq. 10.5), without "
+                        f"it. Drop {name}, or use 'MlpPolicy' with policy_kwargs=dict(net_arch=[]) for a linear q̂ "
+                        "trained through autograd"
+                    )
         target_network = self.target_update_interval is not None
         return self.policy_class(
             self.observation_space,
@@ -477,12 +442,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             # A subclass's greedy policy (action masking, say), as SB3's DQN's ε-greedy takes its policy's predict
             greedy = self.policy._predict(obs_as_tensor(obs, self.device), deterministic=False)
             return self._epsilon_greedy(greedy.cpu().numpy().reshape(-1))
-        if self._tile_coded is not None:
-            q_values = self._tile_q_values(*self._tile_coded, obs)  # type: ignore[arg-type]
-        else:
-            q_values = self.policy.q_net(obs_as_tensor(obs, self.device)).cpu().numpy()
+        q_values = self.policy.q_values(obs)
         if self.update_mode == "per_step":
-            # Kept for the bootstrap of the next update, if no update comes in between (see _next_state_values)
+            # Kept for the bootstrap of the next update, if no update comes in between (see _values_at)
             self._rollout_q_values = RolloutQValues(q_values, self._n_updates, self.num_timesteps)
         return self._epsilon_greedy(greedy_random_ties(q_values))
 
@@ -512,170 +474,99 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         actions, state = self.policy.predict(observation, state, episode_start, deterministic=deterministic)
         return (actions if deterministic else self._epsilon_greedy(actions, int(self.action_space.start))), state
 
-    def _bootstrap_values(self, q_values: th.Tensor) -> np.ndarray:
-        """
-        :param q_values: q̂(S, ·) of states to bootstrap from, shape (..., n_actions), detached
-        :return: the ε-greedy expectation Σ_a π(a|S) q̂(S, a) (S&B eq. 7.8)
-        """
-        return epsilon_greedy_expectation(q_values.cpu().numpy(), self.exploration_rate)
-
     def _training_batch(self) -> TrainingBatch | None:
         """
-        :return: every transition not trained on yet whose n-step target G_{t:t+n} is known, with that target, in
-            time order (None if there is none yet)
-        """
-        if self.n_envs == 1 and self.train_freq == 1:
-            return self._book_loop_batch()
-        data = self.rollout_buffer.get()
-        # G_{t:t+n} (S&B eq. 10.4) = the window's rewards + γ^K × its bootstrap value
-        all_windows = nstep_windows(data.rewards, data.dones, self.gamma, self.n_steps)
-        trained = all_windows.complete & data.pending
-        if not trained.any():
-            return None
-        rows, envs = np.nonzero(trained)  # row-major: time order
-        stop_rows = all_windows.stop_rows[rows, envs]
-        reward_sums = all_windows.reward_sums[rows, envs]
-        bootstrap_discounts = all_windows.bootstrap_discounts[rows, envs]
-        return self._batch_with_targets(rows, envs, stop_rows, reward_sums, bootstrap_discounts, trained)
-
-    def _book_loop_batch(self) -> TrainingBatch | None:
-        """
-        ``_training_batch`` for the book's loop (one env, an update every step): the same batch to the last bit,
-        without the whole-buffer arrays of the general case, which cost more than the gradient step's own overhead
-        when they run every env step. One or a few windows per update, each computed alone (``nstep_window``: the
-        same bits as ``nstep_windows``, without its cost of n × the steps held).
-        """
-        buffer = self.rollout_buffer
-        start, pos = int(buffer.start[0]), buffer.pos
-        rewards, dones = buffer.rewards[:pos, 0], buffer.dones[:pos, 0]
-        discounts = gamma_powers(self.gamma, self.n_steps)
-        if dones[start:pos].any():
-            # An episode ended: the pending transitions up to it complete together (the complete targets are a prefix)
-            windows = []
-            for t in range(start, pos):
-                window = nstep_window(rewards, dones, t, discounts, self.n_steps)
-                if not window.complete:
-                    break
-                windows.append(window)
-        else:
-            # Without an episode end, G_{t:t+n} is known once step t+n has been taken (S_{t+n}, A_{t+n} stored)
-            windows = [nstep_window(rewards, dones, t, discounts, self.n_steps) for t in range(start, pos - self.n_steps)]
-        if not windows:
-            return None
-        rows = np.arange(start, start + len(windows))
-        stop_rows = np.array([window.stop_row for window in windows])
-        reward_sums = np.array([window.reward_sum for window in windows], dtype=np.float32)
-        bootstrap_discounts = np.array([window.bootstrap_discount for window in windows], dtype=np.float32)
-        return self._batch_with_targets(
-            rows, np.zeros(len(windows), dtype=np.int64), stop_rows, reward_sums, bootstrap_discounts, len(windows)
-        )
-
-    def _batch_with_targets(
-        self,
-        rows: np.ndarray,
-        envs: np.ndarray,
-        stop_rows: np.ndarray,
-        reward_sums: np.ndarray,
-        bootstrap_discounts: np.ndarray,
-        trained: np.ndarray | int,
-    ) -> TrainingBatch:
-        """
-        :param rows: the buffer rows of the transitions to train on, in time order
-        :param envs: their envs
-        :param stop_rows: the row of each one's window's last reward
-        :param reward_sums: R_{t+1} + γR_{t+2} + … over each window, float32
-        :param bootstrap_discounts: γ^K for each window of K rewards, float32
-        :param trained: what to pass to the buffer's ``mark_trained`` after the update
-        :return: the transitions with their targets G_{t:t+n} (S&B eq. 10.4)
+        :return: every transition not trained on yet whose target G_{t:t+n} is known, with that target, in time order
+            (None if there is none yet)
         """
         buffer = self.rollout_buffer
         pos = buffer.pos
-        bootstrap = np.zeros(len(rows), dtype=np.float32)
-        # Semi-gradient: the bootstrap values come from the current weights, without gradient, and only where a
-        # target needs one: no bootstrap past a termination, the final state's after a truncation
-        continuing = ~buffer.dones[stop_rows, envs]
-        truncated = buffer.truncated[stop_rows, envs]
+        windows = completed_windows(buffer.rewards[:pos], buffer.dones[:pos], buffer.start, self.gamma, self.n_steps)
+        if len(windows.rows) == 0:
+            return None
         # λ-returns need the value after every step of each window: of every stored step, from one forward pass
-        stored_values = self._stored_values() if self.td_lambda < 1.0 else None
+        step_values = self._stored_values() if self.td_lambda < 1.0 else None
+        bootstrap = self._window_bootstrap_values(windows, step_values)
+        targets = sarsa_targets(windows, bootstrap, buffer.rewards[:pos], step_values, self.gamma, self.td_lambda)
+        rows, envs = windows.rows, windows.envs
+        return TrainingBatch(
+            observations=select(buffer.observations, (rows, envs)),
+            actions=buffer.actions[rows, envs],
+            targets=targets,
+            episode_steps=buffer.episode_steps[rows, envs],
+            n_trained=np.bincount(envs, minlength=self.n_envs),
+        )
+
+    def _window_bootstrap_values(self, windows: CompletedWindows, step_values: np.ndarray | None) -> np.ndarray:
+        """
+        Semi-gradient: the values come from the bootstrap network's current weights, without gradient, and only where
+        a target needs one.
+
+        :param windows: the windows of an update's transitions
+        :param step_values: ``_stored_values()``, if computed already (λ-returns)
+        :return: the value each window bootstraps from after its last reward (S&B eq. 10.4), shape (B,), float32: that
+            of the next step while the episode goes on (``_values_at``), none after a termination (0), the ε-greedy
+            expectation of q̂ in the final state after a time-limit truncation
+        """
+        buffer = self.rollout_buffer
+        envs, stop_rows = windows.envs, windows.stop_rows
+        ended = buffer.dones[stop_rows, envs]
+        if not np.count_nonzero(ended):  # (every episode goes on: all but the updates at an episode's end)
+            return self._values_at(stop_rows + 1, envs, step_values)
+        bootstrap = np.zeros(len(stop_rows), dtype=np.float32)
+        continuing = ~ended
         if continuing.any():
-            next_rows = stop_rows[continuing] + 1
-            if stored_values is not None:
-                bootstrap[continuing] = stored_values[next_rows, envs[continuing]]
-            else:
-                bootstrap[continuing] = self._next_state_values(next_rows, envs[continuing])
+            bootstrap[continuing] = self._values_at(stop_rows[continuing] + 1, envs[continuing], step_values)
+        truncated = buffer.truncated[stop_rows, envs]
         if truncated.any():
             # Every truncation in the buffer in one forward pass, as the rollout stored them (a batch of other rows
             # could round q̂ differently in the last bit: seeded runs would not repeat)
-            truncations = buffer.truncated[:pos]
-            final_obs = obs_as_tensor(select(select(buffer.final_observations, slice(0, pos)), truncations), self.device)
+            truncations = buffer.truncated[: buffer.pos]
+            final_obs = select(select(buffer.final_observations, slice(0, buffer.pos)), truncations)
             final_values = np.zeros(truncations.shape, dtype=np.float32)
-            with th.no_grad():
-                final_values[truncations] = self._bootstrap_values(self.policy.bootstrap_net(final_obs))
+            final_values[truncations] = epsilon_greedy_expectation(self._bootstrap_q_values(final_obs), self.exploration_rate)
             bootstrap[truncated] = final_values[stop_rows[truncated], envs[truncated]]
-        if stored_values is None:
-            # G_{t:t+n} = R_{t+1} + … + γ^{K−1}R_{t+K} + γ^K × the bootstrap value (S&B eq. 10.4), float32
-            targets = reward_sums + bootstrap_discounts * bootstrap
-        else:
-            # G^λ_{t:t+n} (S&B eq. 12.9): q̂(S_{k+1}, A_{k+1}) after each step k of a window, its bootstrap after the last
-            next_values = np.zeros_like(stored_values)
-            next_values[:-1] = stored_values[1:]
-            next_values[stop_rows, envs] = bootstrap
-            targets = truncated_lambda_returns(
-                buffer.rewards[:pos], next_values, rows, envs, stop_rows, self.gamma, self.td_lambda
-            )
-        return TrainingBatch(
-            observations=obs_as_tensor(select(buffer.observations, (rows, envs)), self.device),
-            actions=th.as_tensor(buffer.actions[rows, envs].reshape(-1, 1), device=self.device),
-            targets=th.as_tensor(targets, device=self.device),
-            episode_steps=th.as_tensor(buffer.episode_steps[rows, envs], device=self.device),
-            trained=trained,
-        )
+        return bootstrap
 
-    def _next_state_values(self, rows: np.ndarray, envs: np.ndarray) -> np.ndarray:
+    def _values_at(self, rows: np.ndarray, envs: np.ndarray, step_values: np.ndarray | None) -> np.ndarray:
         """
         :param rows: the buffer rows to bootstrap from
         :param envs: their envs
-        :return: q̂(S, A) of the action taken there (SARSA), or Σ_a π(a|S) q̂(S, a) (Expected SARSA), float32
+        :param step_values: ``_stored_values()``, if computed already
+        :return: ``_action_values`` there, float32: from the rollout's forward pass of the last step's states when it
+            holds them with the weights of now (the per-step mode's every bootstrap with ``train_freq=1``, which then
+            needs no forward pass of its own), else from ``_stored_values``
         """
-        buffer = self.rollout_buffer
-        last_step_q = self._last_step_q_values()
-        if last_step_q is not None and (rows == buffer.pos - 1).all():
-            # q̂(S, ·) of the last step's states, computed by the rollout loop with the same weights (no update since):
-            # with train_freq=1 this is every bootstrap of the per-step mode, which then needs one forward pass less.
-            # The batch mode always takes the pass below: its bootstrap values are those of one forward pass over
-            # every stored step, the same bits whatever rows an update needs
-            return self._sarsa_values(last_step_q[envs], buffer.actions[rows, envs])
+        if step_values is not None:
+            return step_values[rows, envs]
+        last = self._rollout_q_values
+        if (
+            last.n_updates == self._n_updates
+            and last.num_timesteps + self.n_envs == self.num_timesteps
+            and int(rows[0]) == self.rollout_buffer.pos - 1  # (rows in time order: all of them the last step's)
+            and self.update_mode == "per_step"  # (the batch mode's values are those of one pass over every stored step)
+            and self.policy.q_net_target is None
+        ):
+            return self._action_values(last.q_values[envs], self.rollout_buffer.actions[rows, envs])
         return self._stored_values()[rows, envs]
 
     def _stored_values(self) -> np.ndarray:
         """
-        :return: q̂(S_t, A_t) (SARSA) or Σ_a π(a|S_t) q̂(S_t, a) (Expected SARSA) of every stored step t, with the
-            bootstrap network, shape (n_steps_stored, n_envs), float32. One forward pass over the whole buffer,
-            whatever rows are needed, so that a seeded run repeats to the last bit
+        :return: ``_action_values`` of every stored step, with the bootstrap network, shape (n_steps_stored, n_envs),
+            float32. One forward pass over the whole buffer, whatever rows are needed, so that a seeded run repeats to
+            the last bit
         """
         data = self.rollout_buffer.get()
         n_rows, n_envs = data.rewards.shape
-        observations = obs_as_tensor(select(data.observations, np.ones((n_rows, n_envs), dtype=bool)), self.device)
+        q_values = self._bootstrap_q_values(select(data.observations, np.ones((n_rows, n_envs), dtype=bool)))
+        return self._action_values(q_values, data.actions.reshape(-1)).reshape(n_rows, n_envs)
+
+    def _bootstrap_q_values(self, observations: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
+        """:return: q̂(S, ·) of a batch of observations from the bootstrap network, shape (B, n_actions), no gradient"""
         with th.no_grad():
-            q_values = self.policy.bootstrap_net(observations).cpu().numpy()
-        return self._sarsa_values(q_values, data.actions.reshape(-1)).reshape(n_rows, n_envs)
+            return self.policy.bootstrap_net(obs_as_tensor(observations, self.device)).cpu().numpy()
 
-    def _last_step_q_values(self) -> np.ndarray | None:
-        """
-        :return: q̂(S, ·) of the last step's states, shape (n_envs, n_actions), as the rollout loop computed them
-            (``update_mode="per_step"``, no bootstrap network), if no update has changed the weights since; else None
-        """
-        last = self._rollout_q_values
-        if (
-            self.update_mode == "per_step"
-            and self.policy.q_net_target is None
-            and last.n_updates == self._n_updates
-            and last.num_timesteps + self.n_envs == self.num_timesteps
-        ):
-            return last.q_values
-        return None
-
-    def _sarsa_values(self, q_values: np.ndarray, actions: np.ndarray) -> np.ndarray:
+    def _action_values(self, q_values: np.ndarray, actions: np.ndarray) -> np.ndarray:
         """
         :param q_values: q̂(S, ·) of the states to bootstrap from, shape (B, n_actions)
         :param actions: the actions taken there, shape (B,)
@@ -683,161 +574,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         """
         if self.expected_sarsa:
             return epsilon_greedy_expectation(q_values, self.exploration_rate).astype(np.float32)
-        return q_values[np.arange(len(actions)), actions].astype(np.float32)
-
-    def _gradient_step(
-        self, observations: th.Tensor | dict[str, th.Tensor], actions: th.Tensor, targets: th.Tensor
-    ) -> tuple[th.Tensor, th.Tensor]:
-        """
-        One gradient step of q̂ on the mean loss of the given transitions.
-
-        :param observations: S_t, a batch of B
-        :param actions: A_t as indices, shape (B, 1)
-        :param targets: G_{t:t+n}, shape (B,)
-        :return: q̂(S_t, A_t) before the step, shape (B,), and the loss, both detached
-        """
-        if len(targets) == 1:
-            layer = self._plain_sgd_linear_layer()
-            if layer is not None:
-                return self._linear_sgd_step(layer, observations, actions, targets)
-        q_predicted = self.policy.q_net(observations).gather(1, actions).flatten()
-        # w ← w + α [G_{t:t+n} − q̂(S_t, A_t, w)] ∇q̂(S_t, A_t, w) (S&B eq. 10.5): the gradient of ½(G − q̂)²
-        if self.loss_function == "mse":
-            loss = 0.5 * F.mse_loss(q_predicted, targets)
-        else:
-            loss = F.smooth_l1_loss(q_predicted, targets)
-        self.policy.optimizer.zero_grad()
-        loss.backward()
-        self._clip_gradients(self.policy.q_net.parameters())
-        self.policy.optimizer.step()
-        return q_predicted.detach(), loss.detach()
-
-    def _plain_sgd_linear_layer(self) -> th.nn.Linear | None:
-        """
-        :return: q̂'s layer if q̂ is linear (``SARSAPolicy.linear_layer``) and trained by plain SGD (no momentum, weight
-            decay, ``maximize``, fused or foreach implementation, every parameter of the layer in it and not frozen) on
-            the MSE loss without gradient clipping: the book's linear methods, whose update ``_linear_sgd_step``
-            applies without autograd; else None
-        """
-        layer = self.policy.linear_layer
-        optimizer = self.policy.optimizer
-        if (
-            layer is None
-            or type(optimizer) is not th.optim.SGD
-            or len(optimizer.param_groups) != 1
-            or self.loss_function != "mse"
-            or (self.max_grad_norm is not None and math.isfinite(self.max_grad_norm))
-        ):
-            return None
-        group = optimizer.param_groups[0]
-        plain = not (group["momentum"] or group["weight_decay"] or group["maximize"] or group["foreach"] or group["fused"])
-        # Every parameter of the layer trained by that optimizer (autograd leaves a frozen one, or one outside it, alone)
-        params = group["params"]
-        trained = all(parameter.requires_grad and any(parameter is p for p in params) for parameter in layer.parameters())
-        return layer if plain and trained else None
-
-    def _linear_sgd_step(
-        self, layer: th.nn.Linear, observations: th.Tensor | dict[str, th.Tensor], actions: th.Tensor, targets: th.Tensor
-    ) -> tuple[th.Tensor, th.Tensor]:
-        """
-        ``_gradient_step`` on one transition for a linear q̂(s, a, w) = W_a x(s) (+ b_a) and plain SGD: the update
-        W_a ← W_a + α [G − q̂(S_t, A_t, w)] x(S_t) (S&B eq. 10.5 with ∇q̂ = x, §9.4), applied to the one row without
-        autograd. The same arithmetic as autograd's gradient of ½(G − q̂)² and ``torch.optim.SGD``'s step, so the weights
-        are the same to the last bit, at a fraction of the cost: the per-step mode makes this update at every env step.
-        Over ``TileCoding`` it is ``_tile_sgd_step``'s, over the active tiles, whose weights agree with autograd's to
-        float32 rounding.
-
-        :param layer: q̂'s linear layer (``_plain_sgd_linear_layer``)
-        :param observations: S_t, a batch of one
-        :param actions: A_t as an index, shape (1, 1)
-        :param targets: G_{t:t+n}, shape (1,)
-        :return: q̂(S_t, A_t) before the step, shape (1,), and the loss ½(G − q̂)², both detached
-        """
-        action = int(actions[0, 0])
-        if self._tile_sgd is not None and self._tile_sgd.layer is layer:
-            q_value, loss = self._tile_sgd_step(*self._tile_sgd, observations.numpy(), action, targets.numpy()[0])  # type: ignore[union-attr]
-            return th.tensor([q_value]), th.tensor([loss])
-        learning_rate = float(self.policy.optimizer.param_groups[0]["lr"])
-        q_net = self.policy.q_net
-        with th.no_grad():
-            features = q_net.extract_features(observations, q_net.features_extractor)
-            q_predicted = F.linear(features, layer.weight, layer.bias)[:, action]
-            # ∂½(G − q̂)²/∂q̂ = q̂ − G: the gradient of W_a is (q̂ − G) x(S_t), of b_a (q̂ − G); SGD adds −α × gradient
-            error = q_predicted - targets
-            layer.weight[action].add_(features[0] * error, alpha=-learning_rate)
-            if layer.bias is not None:
-                layer.bias[action : action + 1].add_(error, alpha=-learning_rate)
-        return q_predicted, 0.5 * error.square()
-
-    def _tile_coded_q(self) -> TileCodedQ | None:
-        """
-        :return: q̂'s tile coder and layer if q̂ is linear over ``TileCoding`` features (``SARSAPolicy.linear_layer``)
-            on the CPU: the book's linear methods on Mountain Car (Figs 10.1–10.4), whose q̂ the rollout computes and
-            whose plain-SGD updates of one transition (every update of the per-step mode) apply over the active tiles
-            (``_tile_q_values``, ``_tile_sgd_step``); else None
-        """
-        layer = self.policy.linear_layer
-        if layer is None or layer.weight.device.type != "cpu":
-            return None
-        extractor = self.policy.q_net.features_extractor
-        # Not a subclass's own features (its forward could compute anything from the tiles), nor scaled images
-        # (preprocess_obs would divide them by 255 first)
-        if not isinstance(extractor, TileCoding) or type(extractor).forward is not TileCoding.forward:
-            return None
-        if self.policy.normalize_images and is_image_space(self.observation_space):
-            return None
-        return TileCodedQ(extractor, layer)
-
-    def _tile_q_values(self, extractor: TileCoding, layer: th.nn.Linear, observations: np.ndarray) -> np.ndarray:
-        """
-        q̂(s, ·, w) = W x(s) (+ b) for binary tile features as the book's code computes it: the sum of the active tiles'
-        weights, Σ_t W[a, i_t(s)] (S&B §9.5.4, the ``tiles3`` code's ``sum(w[tiles])``), without the dense x(s) and a
-        matrix product over its n_tilings × tiles_per_tiling entries. The same values as the dense product to float32
-        rounding (another order of summation), at a fraction of the cost of PyTorch's calls on one observation.
-
-        :param extractor: q̂'s tile coder
-        :param layer: q̂'s linear layer
-        :param observations: a batch of observations, shape (batch, *obs_shape)
-        :return: q̂(s, ·) of each, shape (batch, n_actions), float32
-        """
-        tiles = self._active_tiles(extractor, observations)
-        q_values: np.ndarray = layer.weight.detach().numpy()[:, tiles].sum(axis=-1).T
-        if layer.bias is not None:
-            q_values = q_values + layer.bias.detach().numpy()
-        return q_values
-
-    def _tile_sgd_step(
-        self, extractor: TileCoding, layer: th.nn.Linear, observation: np.ndarray, action: int, target: np.floating
-    ) -> tuple[float, float]:
-        """
-        ``_linear_sgd_step`` over tile features: W_a ← W_a + α[G − q̂(S_t, A_t, w)] x(S_t) (S&B eq. 10.5 with
-        ∇q̂ = x, §9.4) adds α[G − q̂] to the weight of each active tile i_t(S_t) (and to b_a), as the book's code for
-        Mountain Car does; a hashed tile met by k tilings gets it k times, as its feature is k. The arithmetic of
-        autograd's gradient and ``torch.optim.SGD``'s step in float32, with q̂ summed over the active tiles
-        (``_tile_q_values``): the weights agree with theirs to float32 rounding.
-
-        :param extractor: q̂'s tile coder
-        :param layer: q̂'s linear layer
-        :param observation: S_t, a batch of one, shape (1, *obs_shape)
-        :param action: A_t as an index
-        :param target: G_{t:t+n}, float32
-        :return: q̂(S_t, A_t) before the step and the loss ½(G − q̂)²
-        """
-        learning_rate = np.float32(self.policy.optimizer.param_groups[0]["lr"])
-        tiles = self._active_tiles(extractor, observation)[0]
-        weights = layer.weight.detach().numpy()[action]  # a view: the update changes the parameter itself
-        bias = None if layer.bias is None else layer.bias.detach().numpy()
-        q_value = weights[tiles].sum() + (bias[action] if bias is not None else np.float32(0.0))
-        # ∂½(G − q̂)²/∂W_a = (q̂ − G) x(S_t): SGD adds −α(q̂ − G) to each active tile's weight (once per tiling)
-        error = q_value - np.float32(target)
-        step = -learning_rate * error
-        if extractor.hash_size is None:
-            weights[tiles] += step  # (one tile per tiling, all distinct)
-        else:
-            np.add.at(weights, tiles, step)
-        if bias is not None:
-            bias[action] += step
-        return float(q_value), float(np.float32(0.5) * error * error)
+        return q_values[np.arange(len(actions)), actions].astype(np.float32, copy=False)
 
     def train(self) -> None:
         """Update q̂ towards the n-step targets of every transition whose target is known and not trained on yet."""
@@ -845,127 +582,74 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self._update_learning_rates([(self.policy.optimizer, self.lr_schedule, "train/learning_rate")])
         self._update_exploration_rate()
         self.logger.record("rollout/exploration_rate", self.exploration_rate)
-        if self._book_loop_step():
-            return
+        # (S_t, A_t, G_{t:t+n}) of every transition whose n steps have been taken (S&B eq. 10.4)
         batch = self._training_batch()
         if batch is None:
             return
 
-        # The rows of the batch are time-major: step t of every env, then step t+1
+        # Batch: gradient steps on the mean loss of all; per step: each transition's own update, in time order
         chunks = self._update_slices(len(batch.targets))
-        q_first: list[th.Tensor] = []  # q̂(S_t, A_t) before the update's first pass, for the log
-        losses: list[th.Tensor] = []  # every gradient step's, for the log's mean (SB3's DQN logs the mean)
+        q_first: list[np.ndarray] = []  # q̂(S_t, A_t) before the update's first pass, for the log
+        losses: list[float] = []  # every gradient step's, for the log's mean (SB3's DQN logs the mean)
         for gradient_step in range(self.gradient_steps):
             for chunk in chunks:
-                if len(chunks) == 1:
-                    # The whole batch, not sliced: the per-step mode would pay three tensor slices at every env step
-                    q_predicted, loss = self._gradient_step(batch.observations, batch.actions, batch.targets)
-                else:
-                    observations = select(batch.observations, chunk)  # type: ignore[arg-type]
-                    q_predicted, loss = self._gradient_step(observations, batch.actions[chunk], batch.targets[chunk])  # type: ignore[arg-type]
+                observations = select(batch.observations, chunk)
+                q_predicted, loss = self._gradient_step(observations, batch.actions[chunk], batch.targets[chunk])
                 losses.append(loss)
                 if gradient_step == 0:
                     q_first.append(q_predicted)
 
-        self.rollout_buffer.mark_trained(batch.trained)
-        target = self.policy.q_net_target
+        self.rollout_buffer.mark_trained(batch.n_trained)
+        self._move_copies()
+        self._n_updates += self.gradient_steps * len(chunks)
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        # (the mean of float32 losses in float32, as th.stack(losses).mean() of SB3's DQN)
+        self.logger.record("train/loss", losses[0] if len(losses) == 1 else th.tensor(losses).mean().item())
+        q_predicted = q_first[0] if len(q_first) == 1 else np.concatenate(q_first)
+        self.logger.record("train/q_mean", math.fsum(q_predicted.tolist()) / len(batch.targets))
+        self.logger.record("train/target_mean", math.fsum(batch.targets.tolist()) / len(batch.targets))
+        self.logger.record("train/n_transitions", len(batch.targets))
+
+    def _gradient_step(
+        self, observations: np.ndarray | dict[str, np.ndarray], actions: np.ndarray, targets: np.ndarray
+    ) -> tuple[np.ndarray, float]:
+        """
+        One gradient step of q̂ on the mean loss of the given transitions: ``LinearQPolicy``'s own SGD step, or autograd
+        and the policy's optimizer.
+
+        :param observations: S_t, a batch of B
+        :param actions: A_t as indices, shape (B,)
+        :param targets: G_{t:t+n}, shape (B,), float32
+        :return: q̂(S_t, A_t) before the step, shape (B,), float32, and the loss
+        """
+        if isinstance(self.policy, LinearQPolicy):
+            return self.policy.sgd_step(observations, actions, targets)
+        index = th.as_tensor(actions, device=self.device).reshape(-1, 1)
+        q_predicted = self.policy.q_net(obs_as_tensor(observations, self.device)).gather(1, index).flatten()
+        target = th.as_tensor(targets, device=self.device)
+        # w ← w + α [G_{t:t+n} − q̂(S_t, A_t, w)] ∇q̂(S_t, A_t, w) (S&B eq. 10.5): the gradient of ½(G − q̂)²
+        huber = self.loss_function == "huber"
+        loss = F.smooth_l1_loss(q_predicted, target) if huber else 0.5 * F.mse_loss(q_predicted, target)
+        self.policy.optimizer.zero_grad()
+        loss.backward()
+        self._clip_gradients(self.policy.q_net.parameters())
+        self.policy.optimizer.step()
+        return q_predicted.detach().cpu().numpy(), loss.item()
+
+    def _move_copies(self) -> None:
+        """
+        After an update, the copies of q̂ move towards it (neither is in the book): the bootstrap network,
+        w⁻ ← τw + (1 − τ)w⁻ every ``target_update_interval`` env steps (SB3's DQN), and the greedy policy's average,
+        w̄ ← τw + (1 − τ)w̄ with τ = ``averaging_tau`` after every update.
+        """
+        target, average = self.policy.q_net_target, self.policy.q_net_average
         if target is not None and self.num_timesteps - self._target_updated_at >= (self.target_update_interval or 0):
-            # w⁻ ← τ w + (1 − τ) w⁻ (SB3's DQN; not in the book)
             _polyak_update(self.policy.q_net, target, self.tau, self.policy.mode_dependent)
             self._target_updated_at = self.num_timesteps
-        self._update_average()
-        self._n_updates += self.gradient_steps * len(chunks)
-        mean_loss = losses[0] if len(losses) == 1 else th.stack(losses).mean()
-        self._record_update(mean_loss, q_first[0] if len(q_first) == 1 else th.cat(q_first), batch.targets)
-
-    def _update_average(self) -> None:
-        """After an update: w̄ ← τw + (1 − τ)w̄ of the greedy policy's average (``averaging_tau``), if there is one."""
-        average = self.policy.q_net_average
         if average is not None and self.averaging_tau is not None:
-            # w̄ ← τ w + (1 − τ) w̄ (SB3's polyak_update; not in the book)
             _polyak_update(self.policy.q_net, average, self.averaging_tau, self.policy.mode_dependent)
 
-    def _record_update(self, loss: th.Tensor, q_predicted: th.Tensor, targets: th.Tensor) -> None:
-        """
-        Log an update.
-
-        :param loss: the mean loss of its gradient steps (each step's loss before its parameter change), as SB3's DQN
-            logs it
-        :param q_predicted: q̂(S_t, A_t) of its transitions before its first gradient step
-        :param targets: their targets G_{t:t+n}
-        """
-        if len(targets) == 1 and targets.device.type == "cpu":
-            # The per-step mode's one transition, at every env step: three .item() cost a quarter of the cat below (on
-            # the CPU; on a GPU each would wait for the device)
-            self._record_values(loss.item(), [q_predicted.item()], [targets.item()])
-            return
-        # One conversion to Python floats and the means there: each .item() or .mean() costs as much as a small tensor
-        # op
-        values = th.cat((loss.reshape(1), q_predicted, targets)).tolist()
-        self._record_values(values[0], values[1 : 1 + len(q_predicted)], values[1 + len(q_predicted) :])
-
-    def _record_values(self, loss: float, q_predicted: list[float], targets: list[float]) -> None:
-        """
-        ``_record_update`` with the values as Python floats (the tile-coded update makes no tensors).
-
-        :param loss: the mean loss of the update's gradient steps
-        :param q_predicted: q̂(S_t, A_t) of its transitions before its first gradient step
-        :param targets: their targets G_{t:t+n}
-        """
-        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
-        self.logger.record("train/loss", loss)
-        self.logger.record("train/q_mean", math.fsum(q_predicted) / len(q_predicted))
-        self.logger.record("train/target_mean", math.fsum(targets) / len(targets))
-        self.logger.record("train/n_transitions", len(targets))
-
-    def _book_loop_step(self) -> bool:
-        """
-        The update of the book's loop (one env, ``train_freq=1``, ``gradient_steps=1``, ``update_mode="per_step"``, no
-        bootstrap network: the box of S&B §10.2) between episode ends, where the one transition to train on is
-        S_{t−n}'s: its window holds n rewards and bootstraps from q̂(S_t, ·), which the rollout has just computed
-        with the same weights. It is ``train()``'s update of that transition to the last bit (the weights, the log),
-        without the general case's arrays over the buffer and its batch of one: those cost about as much as the
-        gradient step's own overhead when they run at every env step.
-
-        :return: whether it made the update (False: ``train()`` goes on with the general case, e.g. at an episode's
-            end, where several transitions complete together, or before n steps have been taken)
-        """
-        if not (self.n_envs == 1 and self.train_freq == 1 and self.gradient_steps == 1 and self.td_lambda == 1.0):
-            return False
-        last_step_q = self._last_step_q_values()  # (None unless per-step, without a bootstrap network)
-        buffer = self.rollout_buffer
-        start, pos = int(buffer.start[0]), buffer.pos
-        if last_step_q is None or pos - start != self.n_steps + 1 or buffer.dones[start:pos, 0].any():
-            return False
-        discounts = gamma_powers(self.gamma, self.n_steps)
-        window = nstep_window(buffer.rewards[:pos, 0], buffer.dones[:pos, 0], start, discounts, self.n_steps)
-        # q̂(S_t, A_t), or Σ_a π(a|S_t) q̂(S_t, a) (Expected SARSA), of the step just taken
-        bootstrap = self._sarsa_values(last_step_q, buffer.actions[pos - 1 : pos, 0])
-        # G_{t:t+n} = R_{t+1} + … + γ^{n−1}R_{t+n} + γ^n q̂(S_{t+n}, A_{t+n}) (S&B eq. 10.4), float32, shape (1,)
-        target_value = window.reward_sum + window.bootstrap_discount * bootstrap
-        if self._tile_sgd is not None:
-            # (no tensors at all: the book's Mountain Car, where they would cost more than the update; tile coding
-            # takes Box observations, an array)
-            observations: np.ndarray = buffer.observations  # type: ignore[assignment]
-            q_value, loss_value = self._tile_sgd_step(
-                *self._tile_sgd, observations[start : start + 1, 0], int(buffer.actions[start, 0]), target_value[0]
-            )
-        else:
-            target = th.as_tensor(target_value, device=self.device)
-            observation = obs_as_tensor(select(buffer.observations, (slice(start, start + 1), 0)), self.device)
-            action = th.as_tensor(buffer.actions[start : start + 1, 0].reshape(-1, 1), device=self.device)
-            q_predicted, loss = self._gradient_step(observation, action, target)
-        self._update_average()
-        buffer.mark_trained(1)
-        self._n_updates += 1
-        if self._tile_sgd is not None:
-            self._record_values(loss_value, [q_value], [float(target_value[0])])
-        else:
-            self._record_update(loss, q_predicted, target)
-        return True
-
     def _on_learn_start(self) -> None:
-        self._find_tile_coding()
         # num_timesteps may have been reset: the bootstrap network's next copy counts from here
         self._target_updated_at = min(self._target_updated_at, self.num_timesteps)
         # A linear ε restarts with this learn() call from its first step (SB3's DQN), not after the first rollout
@@ -975,9 +659,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         return ', "auto" (every 128 env steps per env)'
 
     def _excluded_save_params(self) -> list[str]:
-        # A cache of the rollout loop's last forward pass, and references to the policy's modules (_find_tile_coding):
-        # not training state
-        return [*super()._excluded_save_params(), "_rollout_q_values", "_tile_coded", "_tile_sgd", "_tiles_cache"]
+        # A cache of the rollout loop's last forward pass: not training state
+        return [*super()._excluded_save_params(), "_rollout_q_values"]
 
     def learn(
         self: SelfNStepSARSA,

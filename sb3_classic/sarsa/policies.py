@@ -1,12 +1,14 @@
 """Q-network policies of n-step SARSA: q̂(s, ·, w), one output per action."""
 
 import copy
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch as th
+import torch.nn.functional as F
 from gymnasium import spaces
 from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.torch_layers import (
     BaseFeaturesExtractor,
     CombinedExtractor,
@@ -15,11 +17,13 @@ from stable_baselines3.common.torch_layers import (
     create_mlp,
 )
 from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
+from stable_baselines3.common.utils import obs_as_tensor
 from stable_baselines3.dqn.policies import QNetwork
 from torch import nn
 
 from sb3_classic.common.policies import EnvActionsMixin, mode_dependent
 from sb3_classic.common.returns import greedy_random_ties
+from sb3_classic.common.tile_coding import TileCoding
 from sb3_classic.common.torch_layers import (
     check_constant_init_is_linear,
     check_net_arch,
@@ -31,6 +35,14 @@ from sb3_classic.common.torch_layers import (
     optimizer_kwargs_with_defaults,
 )
 from sb3_classic.common.utils import check_bool
+
+
+class TileWeights(NamedTuple):
+    """A linear q̂ over tiles: its tile coder, and its weights W and bias b as NumPy views of the parameters."""
+
+    tile_coding: TileCoding
+    weight: np.ndarray  #: W, shape (n_actions, features_dim)
+    bias: np.ndarray | None  #: b, shape (n_actions,)
 
 
 class SARSAPolicy(EnvActionsMixin, BasePolicy):
@@ -52,7 +64,7 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         ``"default"`` (PyTorch's default everywhere, as SB3's DQN), or a number: every weight starts at that constant
         and every bias at 0 (the book's linear methods start at 0)
     :param with_bias: whether the linear layers have a bias (SB3's ``create_mlp`` name). The book's linear q̂(s, a, w)
-        = wᵀx(s, a) is ``net_arch=[], with_bias=False, weight_init=0.0`` over features x such as ``TileCoding``'s
+        = wᵀx(s, a) with its own SGD update is ``LinearQPolicy`` (``"LinearPolicy"``)
     :param layer_norm: LayerNorm after every hidden linear layer, before its activation (as CleanRL's PQN, which
         learns with on-policy Q-targets from the online network: it keeps the features' scale, and so the targets',
         from drifting)
@@ -149,34 +161,10 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         #: Whether a subclass overrides ``_predict`` (its greedy policy, e.g. action masking): the ε-greedy behaviour
         #: policy is then ε-greedy in it, as SB3's DQN's is
         self.own_predict = type(self)._predict is not SARSAPolicy._predict
-        # q̂'s one layer if q̂ is linear in features without parameters (see linear_layer); in __dict__, not registered
-        # as a submodule again (the state dict keeps its keys)
-        linear = len(layers) == 1 and isinstance(output, nn.Linear) and next(features_extractor.parameters(), None) is None
-        self.__dict__["_linear_layer"] = output if linear else None
         self.q_net_target = self._frozen_copy() if target_network else None
         self.q_net_average = self._frozen_copy() if averaged_network else None
         optimizer_kwargs = optimizer_kwargs_with_defaults(self.optimizer_class, self.optimizer_kwargs)
         self.optimizer = self.optimizer_class(self.q_net.parameters(), lr=lr_schedule(1), **optimizer_kwargs)  # type: ignore[call-arg]
-
-    @property
-    def linear_layer(self) -> nn.Linear | None:
-        """
-        q̂'s only layer when q̂ is linear in its features, q̂(s, ·, w) = W x(s) (+ b): ``net_arch=[]`` over a features
-        extractor without parameters (``TileCoding``, ``FlattenExtractor``), the book's linear methods (§9.4, §10.1),
-        computed by SB3's ``QNetwork`` (a subclass's own ``forward`` or ``extract_features``, from ``make_q_net``,
-        could compute anything); None otherwise. Its gradient is then ∇_{W_a} q̂(s, a, w) = x(s) (S&B §9.4, after
-        eq. 9.8), so that the SGD update is w ← w + α[U − q̂]x(s) (eq. 9.9), which ``NStepSARSA`` applies without
-        autograd.
-        """
-        layer: nn.Linear | None = self.__dict__["_linear_layer"]
-        if layer is None:
-            return None
-        q_net = type(self.q_net)
-        if q_net.forward is not QNetwork.forward or q_net.extract_features is not QNetwork.extract_features:
-            return None
-        # (None if q̂'s layers were replaced since construction)
-        modules = self.q_net.q_net._modules
-        return layer if len(modules) == 1 and modules.get("0") is layer else None
 
     def _frozen_copy(self) -> QNetwork:
         """:return: a copy of q̂ as it is now, without gradients, in evaluation mode, outside the optimizer"""
@@ -186,9 +174,29 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         return frozen
 
     @property
+    def device(self) -> th.device:
+        """
+        The device of q̂'s parameters, read from its optimizer's first one: SB3's ``BaseModel.device`` walks every
+        module for it, which costs more than the per-step loop's forward pass of a small q̂.
+        """
+        optimizer = self.__dict__.get("optimizer")
+        if optimizer is None:  # (while the policy is being built)
+            return super().device
+        return optimizer.param_groups[0]["params"][0].device
+
+    @property
     def bootstrap_net(self) -> QNetwork:
         """The network the n-step targets bootstrap from: ``q_net_target`` if there is one, else q̂ itself."""
         return self.q_net if self.q_net_target is None else self.q_net_target
+
+    def q_values(self, observations: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
+        """
+        :param observations: a batch of observations, as a VecEnv returns them
+        :return: q̂(s, ·, w) of each, shape (batch, n_actions), float32, without gradient: what the ε-greedy behaviour
+            policy of ``NStepSARSA`` chooses from
+        """
+        with th.no_grad():
+            return self.q_net(obs_as_tensor(observations, self.device)).cpu().numpy()
 
     def forward(self, obs: PyTorchObs, deterministic: bool = True) -> th.Tensor:
         """:return: the greedy actions argmax_a q̂(obs, a)"""
@@ -281,6 +289,262 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         self.training = mode
 
 
+class LinearQPolicy(SARSAPolicy):
+    """
+    The book's linear action-value function q̂(s, a, w) = W_a x(s) (+ b_a) over features x(s) without parameters
+    (Sutton & Barto §9.4, §10.1: ``TileCoding``'s, or the observation itself), with its own SGD update (``sgd_step``)
+    in place of autograd and the optimizer's step. ``NStepSARSA`` trains it with that update (``policy="LinearPolicy"``).
+
+    The gradient of a linear q̂ is ∇_{W_a} q̂(s, a, w) = x(s) (§9.4, after eq. 9.8), so the update of eq. 10.5 is
+    W_a ← W_a + α[G − q̂(S_t, A_t, w)] x(S_t) (eq. 9.9): ``sgd_step`` applies it to the weights without autograd, the
+    same arithmetic as autograd's gradient of ½(G − q̂)² and ``torch.optim.SGD``'s step (the same weights to the last
+    bit for one transition), at a fraction of the cost: the book's per-step loop makes this update at every env step.
+    Over ``TileCoding`` on the CPU, q̂ and the update go over the active tiles as the book's ``tiles3`` code does (S&B
+    §9.5.4): q̂(s, a) = Σ_i W[a, i(s)] over the active tiles i(s), and α[G − q̂] added to each active tile's weight,
+    without the dense x(s): the same values to float32 rounding (the sum's order differs), several times faster
+    (``benchmarks/results/hot_paths.md``). A ``torch.nn.EmbeddingBag(mode="sum")`` over the tiles with
+    ``torch.optim.SGD`` makes the same update, at many times the cost per update.
+
+    ``optimizer`` is a plain ``torch.optim.SGD``: it holds the learning rate α that the schedules set, and its state
+    is saved as for every policy, but its ``step`` is not called.
+
+    :param observation_space: observation space
+    :param action_space: action space (Discrete)
+    :param lr_schedule: learning-rate schedule (could be constant)
+    :param weight_init: the initial weights: a number (every weight that constant, every bias 0; the book's linear
+        methods start at 0, the default) or ``SARSAPolicy``'s schemes
+    :param with_bias: whether q̂ has a bias b_a (the book's q̂ = wᵀx has none, the default)
+    :param features_extractor_class: the features x(s): an extractor without parameters (``TileCoding``,
+        ``FlattenExtractor``)
+    :param optimizer_class: ``torch.optim.SGD`` (the update is plain SGD)
+    :param optimizer_kwargs: SGD's arguments other than the learning rate, at their defaults (no momentum, dampening,
+        weight decay, Nesterov or ``maximize``, which the update does not have)
+    :param kwargs: the other arguments of ``SARSAPolicy`` (``net_arch`` must be empty: q̂ is linear in x)
+    :raises ValueError: for hidden layers, an optimizer other than plain SGD, or features with parameters
+    """
+
+    #: The tiles of this many single observations are kept (``_active_tiles``): the per-step update codes S_t again
+    #: n steps after the rollout coded it to choose A_t, so n-step returns up to n = 62 find them there
+    TILES_KEPT = 64
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Discrete,
+        lr_schedule: Schedule,
+        weight_init: str | float = 0.0,
+        with_bias: bool = False,
+        features_extractor_class: type[BaseFeaturesExtractor] = FlattenExtractor,
+        optimizer_class: type[th.optim.Optimizer] = th.optim.SGD,
+        optimizer_kwargs: dict[str, Any] | None = None,
+        **kwargs: Any,
+    ) -> None:
+        net_arch = kwargs.setdefault("net_arch", [])
+        if net_arch:
+            raise ValueError(
+                f"net_arch={net_arch!r}: LinearPolicy's q̂ is linear in its features (q̂(s, a, w) = W_a x(s)), without "
+                "hidden layers. Pass net_arch=[] (or leave it out), or use 'MlpPolicy' for a network with hidden layers"
+            )
+        if optimizer_class is not th.optim.SGD:
+            raise ValueError(
+                f"optimizer_class={optimizer_class.__name__}: LinearPolicy's update is plain SGD, W_a ← W_a + α[G − q̂]x "
+                "(S&B eq. 9.9), applied without the optimizer. Leave optimizer_class out, or use 'MlpPolicy' with "
+                "policy_kwargs=dict(net_arch=[]) for a linear q̂ trained by another optimizer"
+            )
+        super().__init__(
+            observation_space,
+            action_space,
+            lr_schedule,
+            weight_init=weight_init,
+            with_bias=with_bias,
+            features_extractor_class=features_extractor_class,
+            optimizer_class=optimizer_class,
+            optimizer_kwargs=optimizer_kwargs,
+            **kwargs,
+        )
+        group = self.optimizer.param_groups[0]
+        extras = {key: group[key] for key in ("momentum", "dampening", "weight_decay", "nesterov", "maximize") if group[key]}
+        if extras:
+            raise ValueError(
+                f"optimizer_kwargs={self.optimizer_kwargs!r}: LinearPolicy's update is plain SGD (S&B eq. 9.9), without "
+                f"{', '.join(extras)}. Drop them, or use 'MlpPolicy' with policy_kwargs=dict(net_arch=[]) and SGD's options"
+            )
+        q_net, layers = type(self.q_net), list(self.q_net.q_net)
+        own_forward = q_net.forward is not QNetwork.forward or q_net.extract_features is not QNetwork.extract_features
+        if own_forward or len(layers) != 1:
+            raise TypeError(
+                f"make_q_net returned a {q_net.__name__} with its own forward or layers: LinearPolicy's update needs SB3's "
+                "QNetwork with one linear layer over the features. Use 'MlpPolicy' for another network"
+            )
+        extractor = self.q_net.features_extractor
+        if next(extractor.parameters(), None) is not None:
+            raise ValueError(
+                f"features_extractor_class={type(extractor).__name__} has parameters: LinearPolicy's q̂ is linear in "
+                "features without parameters (its gradient is x(s)). Use a features extractor without parameters "
+                "(TileCoding, FlattenExtractor), or 'MlpPolicy' with policy_kwargs=dict(net_arch=[]) to train them too"
+            )
+        # q̂'s layer and tile coder are kept in __dict__, not registered as submodules again (the state dict keeps its
+        # keys, and a saved LinearPolicy loads as any SARSAPolicy)
+        #: q̂'s linear layer: W (n_actions, features_dim) and b
+        self.layer: nn.Linear
+        self.__dict__["layer"] = layers[0]
+        # The tile path: TileCoding's own features (a subclass's forward could compute anything from the tiles), and not
+        # scaled images (preprocess_obs would divide them by 255 first)
+        tiles = type(extractor).forward is TileCoding.forward and not (
+            self.normalize_images and is_image_space(observation_space)
+        )
+        #: q̂'s tile coder, if q̂ and the update go over its active tiles (on the CPU); else None
+        self.tile_coding: TileCoding | None
+        self.__dict__["tile_coding"] = extractor if isinstance(extractor, TileCoding) and tiles else None
+        # The active tiles of the last single observations, by their float32 bytes
+        self._tiles_kept: dict[bytes, np.ndarray] = {}
+        # _over_tiles's views, and the memory addresses of the parameters they show
+        self._views: TileWeights | None = None
+        self._views_of: tuple[int, int | None] | None = None
+
+    def _over_tiles(self) -> TileWeights | None:
+        """
+        :return: q̂'s tile coder and its weights and bias as NumPy views of the parameters' memory, if q̂ goes over the
+            active tiles (its weights on the CPU); else None. The views are made again when a parameter's memory
+            changes (``to()``, a new ``Parameter``), and otherwise kept: making them costs more than a step of the book's
+            Mountain Car
+        """
+        if self.tile_coding is None:
+            return None
+        weight, bias = self.layer.weight, self.layer.bias
+        memory = (weight.data_ptr(), None if bias is None else bias.data_ptr())
+        if memory != self._views_of:
+            cpu = weight.is_cpu and (bias is None or bias.is_cpu)
+            self._views = (
+                TileWeights(self.tile_coding, weight.detach().numpy(), None if bias is None else bias.detach().numpy())
+                if cpu
+                else None
+            )
+            self._views_of = memory
+        return self._views
+
+    def _active_tiles(self, tile_coding: TileCoding, observations: np.ndarray) -> np.ndarray:
+        """
+        :param tile_coding: q̂'s tile coder
+        :param observations: a batch of observations, shape (batch, *obs_shape)
+        :return: their active tiles, shape (batch, n_tilings) (``TileCoding.active_tiles_numpy`` of the observations cast
+            to float32, as ``preprocess_obs`` casts them); those of a single observation are kept for ``TILES_KEPT``
+            later observations (the tiles are a function of the observation's values alone)
+        """
+        observations = observations.astype(np.float32, copy=False)
+        if len(observations) != 1:
+            return tile_coding.active_tiles_numpy(observations)
+        key = observations.tobytes()
+        tiles = self._tiles_kept.get(key)
+        if tiles is None:
+            tiles = self._tiles_kept[key] = tile_coding.active_tiles_numpy(observations)
+            if len(self._tiles_kept) > self.TILES_KEPT:
+                del self._tiles_kept[next(iter(self._tiles_kept))]  # the oldest
+        return tiles
+
+    def q_values(self, observations: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
+        """
+        ``SARSAPolicy.q_values``; over tiles, q̂(s, ·) = Σ_i W[·, i(s)] (+ b) over the active tiles i(s) (S&B §9.5.4,
+        the ``tiles3`` code's ``sum(w[tiles])``), without the dense x(s): the same values to float32 rounding.
+
+        :param observations: a batch of observations
+        :return: q̂(s, ·, w) of each, shape (batch, n_actions), float32
+        """
+        over_tiles = self._over_tiles()
+        if over_tiles is None:
+            return super().q_values(observations)
+        tiles = self._active_tiles(over_tiles.tile_coding, observations)  # type: ignore[arg-type]
+        q_values: np.ndarray = over_tiles.weight[:, tiles].sum(axis=-1).T
+        if over_tiles.bias is not None:
+            q_values = q_values + over_tiles.bias
+        return q_values
+
+    def sgd_step(
+        self, observations: np.ndarray | dict[str, np.ndarray], actions: np.ndarray, targets: np.ndarray
+    ) -> tuple[np.ndarray, float]:
+        """
+        One SGD step on the mean of ½(G − q̂(S_t, A_t, w))² over the given transitions, without autograd:
+        W_a ← W_a + (α/B) Σ_{t: A_t = a} [G_t − q̂(S_t, A_t, w)] x(S_t) (S&B eq. 10.5 with ∇q̂ = x, eq. 9.9), and the same
+        for b_a; one transition (B = 1) is the book's update. The learning rate α is the optimizer's. A frozen
+        parameter (``requires_grad=False``) is not changed, as the optimizer would leave it.
+
+        :param observations: S_t, a batch of B
+        :param actions: A_t as indices, shape (B,)
+        :param targets: the targets G, shape (B,), float32
+        :return: q̂(S_t, A_t, w) before the step, shape (B,), float32, and the loss (the mean of ½(G − q̂)²)
+        """
+        if self.q_net.q_net._modules.get("0") is not self.layer:
+            raise RuntimeError(
+                "q̂'s layers were replaced after the LinearPolicy was built, and its update would train the old layer: "
+                "build the model again with the network you want (a LinearPolicy subclass's make_q_net)"
+            )
+        over_tiles = self._over_tiles()
+        if over_tiles is not None:
+            return self._tile_sgd_step(over_tiles, observations, actions, targets)  # type: ignore[arg-type]
+        layer, learning_rate = self.layer, float(self.optimizer.param_groups[0]["lr"])
+        with th.no_grad():
+            features = self.q_net.extract_features(obs_as_tensor(observations, self.device), self.q_net.features_extractor)
+            index = th.as_tensor(actions, device=features.device)
+            q_predicted = F.linear(features, layer.weight, layer.bias).gather(1, index[:, None]).flatten()
+            # ∂½(G − q̂)²/∂q̂ = q̂ − G: the gradient of W_a is (q̂ − G) x(S_t), of b_a (q̂ − G); SGD adds −α × the mean gradient
+            error = q_predicted - th.as_tensor(targets, device=features.device)
+            if len(error) == 1:
+                # One transition: the row A_t alone (the arithmetic of autograd's step, to the last bit)
+                action = int(actions[0])
+                if layer.weight.requires_grad:
+                    layer.weight[action].add_(features[0] * error, alpha=-learning_rate)
+                if layer.bias is not None and layer.bias.requires_grad:
+                    layer.bias[action : action + 1].add_(error, alpha=-learning_rate)
+            else:
+                gradient = error / len(error)
+                if layer.weight.requires_grad:
+                    layer.weight.index_add_(0, index, features * gradient[:, None], alpha=-learning_rate)
+                if layer.bias is not None and layer.bias.requires_grad:
+                    layer.bias.index_add_(0, index, gradient, alpha=-learning_rate)
+            loss = 0.5 * error.square()
+        return q_predicted.cpu().numpy(), (loss if len(loss) == 1 else loss.mean()).item()
+
+    def _tile_sgd_step(
+        self, over_tiles: TileWeights, observations: np.ndarray, actions: np.ndarray, targets: np.ndarray
+    ) -> tuple[np.ndarray, float]:
+        """
+        ``sgd_step`` over the active tiles, as the book's code for Mountain Car does: α[G − q̂] (over B) added to the
+        weight of each active tile i(S_t) in row A_t (and to b_a); a hashed tile met by k tilings gets it k times, as its
+        feature is k. The arithmetic of autograd's gradient and ``torch.optim.SGD``'s step in float32, with q̂ summed
+        over the active tiles: the weights agree with theirs to float32 rounding.
+        """
+        learning_rate = np.float32(self.optimizer.param_groups[0]["lr"])
+        tiles = self._active_tiles(over_tiles.tile_coding, observations)
+        # (views: the update changes the parameters themselves)
+        tile_coding, weights, bias = over_tiles
+        if len(actions) == 1:
+            # The book's update of one transition: its action's row of weights, a view
+            action, row_tiles, row = int(actions[0]), tiles[0], weights[int(actions[0])]
+            q_predicted = row[row_tiles].sum(keepdims=True) + (bias[action] if bias is not None else np.float32(0.0))
+            # ∂½(G − q̂)²/∂W_a = (q̂ − G) x(S_t): SGD adds −α(q̂ − G) to each active tile's weight, once per tiling
+            error = q_predicted - targets
+            step = -learning_rate * error[0]
+            if self.layer.weight.requires_grad:
+                if tile_coding.hash_size is None:
+                    row[row_tiles] += step  # (one tile per tiling, all distinct)
+                else:
+                    np.add.at(row, row_tiles, step)
+            if bias is not None and self.layer.bias.requires_grad:
+                bias[action] += step
+            return q_predicted, float(np.float32(0.5) * error[0] * error[0])
+        q_predicted = weights[actions[:, None], tiles].sum(axis=1)
+        if bias is not None:
+            q_predicted = q_predicted + bias[actions]
+        # The mean loss's gradient: −α(q̂ − G)/B to each active tile's weight of each transition
+        error = q_predicted - targets
+        steps = -learning_rate * error / np.float32(len(error))
+        if self.layer.weight.requires_grad:
+            np.add.at(weights, (actions[:, None], tiles), steps[:, None])
+        if bias is not None and self.layer.bias.requires_grad:
+            np.add.at(bias, actions, steps)
+        return q_predicted, float((np.float32(0.5) * error * error).mean())
+
+
 class SARSACnnPolicy(SARSAPolicy):
     """
     ``SARSAPolicy`` with SB3's NatureCNN features extractor, for image observations.
@@ -328,5 +592,6 @@ class SARSAMultiInputPolicy(SARSAPolicy):
 
 
 MlpPolicy = SARSAPolicy
+LinearPolicy = LinearQPolicy
 CnnPolicy = SARSACnnPolicy
 MultiInputPolicy = SARSAMultiInputPolicy
