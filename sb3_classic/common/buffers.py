@@ -144,6 +144,8 @@ class TrajectoryBuffer(BaseBuffer):
         self.truncated = np.zeros(shape, dtype=bool)
         self.episode_steps = np.zeros(shape, dtype=np.int64)
         self.buffer_size = capacity
+        # (the list, made once: _drop_rows runs at every update)
+        self._stored_arrays = self._arrays()
 
     def reset(self) -> None:
         """Forget everything, including the episodes in progress (call it when the envs are reset)."""
@@ -235,7 +237,7 @@ class TrajectoryBuffer(BaseBuffer):
     def _drop_rows(self, n_rows: int) -> None:
         if n_rows == 0:
             return
-        for array in self._arrays():
+        for array in self._stored_arrays:
             array[: self.pos - n_rows] = array[n_rows : self.pos]
         self.pos -= n_rows
         self.start -= n_rows

@@ -144,11 +144,14 @@ def nstep_window(rewards: np.ndarray, dones: np.ndarray, t: int, discounts: np.n
     :param n_steps: the n of n-step returns, n ≥ 1
     :return: the window (see ``NStepWindow``)
     """
-    window_dones = dones[t : t + n_steps]
     # K rewards: up to the first episode end in the window, else as many of the n as have been taken
-    ends = np.flatnonzero(window_dones)
-    ended = len(ends) > 0
-    n_rewards = int(ends[0]) + 1 if ended else len(window_dones)
+    ends = np.flatnonzero(dones[t : t + n_steps])
+    n_rewards = int(ends[0]) + 1 if len(ends) else min(n_steps, len(rewards) - t)
+    return _window(rewards, t, n_rewards, len(ends) > 0, discounts, n_steps)
+
+
+def _window(rewards: np.ndarray, t: int, n_rewards: int, ended: bool, discounts: np.ndarray, n_steps: int) -> NStepWindow:
+    """``nstep_window`` of a window of ``n_rewards`` rewards, ending an episode or not (``ended``)."""
     # R_{t+1} + γR_{t+2} + … + γ^{K−1}R_{t+K}: float32 terms summed in order (accumulate is sequential)
     reward_sum = np.add.accumulate(rewards[t : t + n_rewards] * discounts[:n_rewards])[-1]
     stop_row = t + n_rewards - 1
@@ -245,15 +248,19 @@ def _windows_one_at_a_time(rewards: np.ndarray, dones: np.ndarray, first: int, g
                 break
             windows.append(window)
     else:
-        # Without an episode end, G_{t:t+n} is known once step t+n has been taken (S_{t+n}, A_{t+n} stored)
-        windows = [nstep_window(env_rewards, env_dones, t, discounts, n_steps) for t in range(first, len(rewards) - n_steps)]
-    # (float32 values, exactly; one array of both columns)
+        # Without an episode end, each window holds n rewards, and G_{t:t+n} is known once step t+n has been taken
+        # (S_{t+n}, A_{t+n} stored)
+        last = len(rewards) - n_steps
+        windows = [_window(env_rewards, t, n_steps, False, discounts, n_steps) for t in range(first, last)]
+    # (one array of the integer columns and one of the float32 ones, whose values are float32 already: the columns are
+    # views, and the per-step mode makes these at every env step)
+    steps = np.array([(t, 0, window.stop_row) for t, window in enumerate(windows, first)], np.int64).reshape(-1, 3)
     pairs = [(window.reward_sum, window.bootstrap_discount) for window in windows]
     sums_and_discounts = np.array(pairs, np.float32).reshape(-1, 2)
     return CompletedWindows(
-        rows=np.arange(first, first + len(windows)),
-        envs=np.zeros(len(windows), dtype=np.int64),
-        stop_rows=np.array([window.stop_row for window in windows], dtype=np.int64),
+        rows=steps[:, 0],
+        envs=steps[:, 1],
+        stop_rows=steps[:, 2],
         reward_sums=sums_and_discounts[:, 0],
         bootstrap_discounts=sums_and_discounts[:, 1],
     )

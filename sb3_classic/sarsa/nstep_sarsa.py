@@ -547,7 +547,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             and self.update_mode == "per_step"  # (the batch mode's values are those of one pass over every stored step)
             and self.policy.q_net_target is None
         ):
-            return self._action_values(last.q_values[envs], self.rollout_buffer.actions[rows, envs])
+            return self._action_values(last.q_values, envs, self.rollout_buffer.actions[rows, envs])
         return self._stored_values()[rows, envs]
 
     def _stored_values(self) -> np.ndarray:
@@ -559,22 +559,24 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         data = self.rollout_buffer.get()
         n_rows, n_envs = data.rewards.shape
         q_values = self._bootstrap_q_values(select(data.observations, np.ones((n_rows, n_envs), dtype=bool)))
-        return self._action_values(q_values, data.actions.reshape(-1)).reshape(n_rows, n_envs)
+        return self._action_values(q_values, np.arange(len(q_values)), data.actions.reshape(-1)).reshape(n_rows, n_envs)
 
     def _bootstrap_q_values(self, observations: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
         """:return: q̂(S, ·) of a batch of observations from the bootstrap network, shape (B, n_actions), no gradient"""
         with th.no_grad():
             return self.policy.bootstrap_net(obs_as_tensor(observations, self.device)).cpu().numpy()
 
-    def _action_values(self, q_values: np.ndarray, actions: np.ndarray) -> np.ndarray:
+    def _action_values(self, q_values: np.ndarray, rows: np.ndarray, actions: np.ndarray) -> np.ndarray:
         """
-        :param q_values: q̂(S, ·) of the states to bootstrap from, shape (B, n_actions)
+        :param q_values: q̂(S, ·) of states, shape (N, n_actions)
+        :param rows: the states to bootstrap from, indices into ``q_values``, shape (B,)
         :param actions: the actions taken there, shape (B,)
-        :return: q̂(S, A) of the action taken (SARSA), or Σ_a π(a|S) q̂(S, a) (Expected SARSA, S&B eq. 7.8), float32
+        :return: q̂(S, A) of the action taken (SARSA), or Σ_a π(a|S) q̂(S, a) (Expected SARSA, S&B eq. 7.8), float32,
+            shape (B,)
         """
         if self.expected_sarsa:
-            return epsilon_greedy_expectation(q_values, self.exploration_rate).astype(np.float32)
-        return q_values[np.arange(len(actions)), actions].astype(np.float32, copy=False)
+            return epsilon_greedy_expectation(q_values[rows], self.exploration_rate).astype(np.float32)
+        return q_values[rows, actions].astype(np.float32, copy=False)
 
     def train(self) -> None:
         """Update q̂ towards the n-step targets of every transition whose target is known and not trained on yet."""
@@ -650,6 +652,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             _polyak_update(self.policy.q_net, average, self.averaging_tau, self.policy.mode_dependent)
 
     def _on_learn_start(self) -> None:
+        if isinstance(self.policy, LinearQPolicy):
+            self.policy.check_layers()
         # num_timesteps may have been reset: the bootstrap network's next copy counts from here
         self._target_updated_at = min(self._target_updated_at, self.num_timesteps)
         # A linear ε restarts with this learn() call from its first step (SB3's DQN), not after the first rollout

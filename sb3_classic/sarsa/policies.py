@@ -276,14 +276,16 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         :param mode: train (True) or evaluation (False) mode of every module; nothing to do if already there (the
             per-step loop switches at every env step, and ``nn.Module.train`` visits every submodule)
         """
-        if self.training == mode and self.q_net.training == mode:
+        q_net = self._modules["q_net"]  # (nn.Module's attribute lookup costs more than the rest of this)
+        assert q_net is not None
+        if self.training == mode and q_net.training == mode:
             return
         if not self.mode_dependent:
             # No module behaves differently in the two modes (every one is of SB3's or torch's plain layers, none a
             # subclass that could read self.training): only the flags change, which saves the per-step loop a walk
             # over every submodule twice per env step. They are plain attributes, set past nn.Module.__setattr__
             # (its checks for parameters and submodules cost more than the assignment)
-            self.__dict__["training"] = self.q_net.__dict__["training"] = mode
+            self.__dict__["training"] = q_net.__dict__["training"] = mode
             return
         self.q_net.set_training_mode(mode)
         self.training = mode
@@ -402,6 +404,17 @@ class LinearQPolicy(SARSAPolicy):
         self._views: TileWeights | None = None
         self._views_of: tuple[int, int | None] | None = None
 
+    def check_layers(self) -> None:
+        """
+        :raises RuntimeError: if q̂'s layers were replaced since the policy was built (``sgd_step`` would train the old
+            layer); ``NStepSARSA`` checks at the start of each ``learn()``
+        """
+        if self.q_net.q_net._modules.get("0") is not self.layer or len(self.q_net.q_net) != 1:
+            raise RuntimeError(
+                "q̂'s layers were replaced after the LinearPolicy was built, and its update would train the old layer: "
+                "build the model again with the network you want (a LinearPolicy subclass's make_q_net)"
+            )
+
     def _over_tiles(self) -> TileWeights | None:
         """
         :return: q̂'s tile coder and its weights and bias as NumPy views of the parameters' memory, if q̂ goes over the
@@ -411,7 +424,9 @@ class LinearQPolicy(SARSAPolicy):
         """
         if self.tile_coding is None:
             return None
-        weight, bias = self.layer.weight, self.layer.bias
+        # (the parameters from the layer's dict: nn.Module's attribute lookup costs more than the rest of this)
+        weight, bias = self.layer._parameters["weight"], self.layer._parameters["bias"]
+        assert weight is not None
         memory = (weight.data_ptr(), None if bias is None else bias.data_ptr())
         if memory != self._views_of:
             cpu = weight.is_cpu and (bias is None or bias.is_cpu)
@@ -473,11 +488,6 @@ class LinearQPolicy(SARSAPolicy):
         :param targets: the targets G, shape (B,), float32
         :return: q̂(S_t, A_t, w) before the step, shape (B,), float32, and the loss (the mean of ½(G − q̂)²)
         """
-        if self.q_net.q_net._modules.get("0") is not self.layer:
-            raise RuntimeError(
-                "q̂'s layers were replaced after the LinearPolicy was built, and its update would train the old layer: "
-                "build the model again with the network you want (a LinearPolicy subclass's make_q_net)"
-            )
         over_tiles = self._over_tiles()
         if over_tiles is not None:
             return self._tile_sgd_step(over_tiles, observations, actions, targets)  # type: ignore[arg-type]
