@@ -39,7 +39,7 @@ from sb3_classic.common.tile_coding import TileCoding
 from sb3_classic.common.torch_layers import WEIGHT_INITS
 from sb3_classic.reinforce import REINFORCE
 from sb3_classic.sarsa import NStepSARSA
-from sb3_classic.sarsa.nstep_sarsa import DEFAULT_EXPLORATION_DECAY_RATE
+from sb3_classic.sarsa.arguments import DEFAULT_EXPLORATION_DECAY_RATE
 
 if TYPE_CHECKING:
     import optuna

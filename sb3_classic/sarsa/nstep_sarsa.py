@@ -8,8 +8,9 @@ import torch.nn.functional as F
 from gymnasium import spaces
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.common.utils import LinearSchedule, get_parameters_by_name, obs_as_tensor, polyak_update
+from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor
 
+from sb3_classic.common.arguments import check_arguments
 from sb3_classic.common.buffers import TrainingBatch, select
 from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
 from sb3_classic.common.returns import (
@@ -20,7 +21,13 @@ from sb3_classic.common.returns import (
     sarsa_targets,
 )
 from sb3_classic.common.schedules import ExponentialDecay
-from sb3_classic.common.utils import check_bool, check_choice, check_positive_int, check_range
+from sb3_classic.sarsa.arguments import (
+    ARGUMENT_RULES,
+    DEFAULT_EXPLORATION_DECAY_RATE,
+    DEFAULT_EXPLORATION_FINAL_EPS,
+    DEFAULT_EXPLORATION_FRACTION,
+    DEFAULT_EXPLORATION_INITIAL_EPS,
+)
 from sb3_classic.sarsa.policies import CnnPolicy, LinearPolicy, LinearQPolicy, MlpPolicy, MultiInputPolicy, SARSAPolicy
 
 SelfNStepSARSA = TypeVar("SelfNStepSARSA", bound="NStepSARSA")
@@ -37,29 +44,6 @@ class RolloutQValues(NamedTuple):
     num_timesteps: int
 
 
-def _polyak_update(source: th.nn.Module, copy: th.nn.Module, tau: float, statistics: bool) -> None:
-    """
-    w' ← τ w + (1 − τ) w' of the parameters (SB3's ``polyak_update``), and the running statistics of normalisation
-    layers (BatchNorm's ``running_mean``, ``running_var``) copied, as SB3's DQN copies them to its target network:
-    they are not parameters, and a copy whose statistics never moved normalises otherwise.
-
-    :param source: q̂'s network
-    :param copy: the bootstrap copy or the weight average
-    :param tau: the coefficient τ
-    :param statistics: whether the networks may hold such statistics (``SARSAPolicy.mode_dependent``): the state_dict
-        walk that finds them costs more than the update of a small q̂
-    """
-    polyak_update(source.parameters(), copy.parameters(), tau)
-    if statistics:
-        polyak_update(get_parameters_by_name(source, ["running_"]), get_parameters_by_name(copy, ["running_"]), 1.0)
-
-
-# The linear ε schedule's, when exploration_fraction is None (SB3's DQN's default)
-DEFAULT_EXPLORATION_FRACTION = 0.1
-# The exponential ε schedule's per-episode factor (the constructor's default)
-DEFAULT_EXPLORATION_DECAY_RATE = 0.995
-# The first ε and the last (the linear schedule's) or the floor (the exponential one's): the constructor's defaults
-DEFAULT_EXPLORATION_INITIAL_EPS, DEFAULT_EXPLORATION_FINAL_EPS = 1.0, 0.05
 # Env steps per env between two logger dumps with learn()'s default log_interval ("auto")
 LOG_EVERY_STEPS = 128
 
@@ -74,50 +58,26 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     action the agent actually took, with no bootstrap past a termination: w ← w + α[G_{t:t+n} − q̂(S_t, A_t, w)]
     ∇q̂(S_t, A_t, w) (eq. 10.5). The gradient does not flow through the target (semi-gradient).
 
-    Every ``train_freq`` steps per env, an update trains on every transition whose target has become known. A
-    transition whose n steps are not all taken yet waits for a later update, so every target is a full n-step return,
-    whatever ``train_freq`` is. ``update_mode`` says how an update applies them:
+    Every ``train_freq`` steps per env, an update trains on every transition whose target has become known (a
+    transition waits until its n steps are taken: every target is a full n-step return), with the weights at the
+    update's start. ``update_mode`` says how:
 
-    - ``"batch"`` (the default): ``gradient_steps`` gradient steps on the *mean* loss of the transitions, as DQN does
-      with a minibatch. Each transition then moves w by α/B of its own step for a batch of B, and at an episode end
-      the last n transitions complete together and share one step;
-    - ``"per_step"``: each transition's own update w ← w + α[G − q̂]∇q̂ with the full step size α, one after the
-      other in time order (episode ends included), ``gradient_steps`` passes. With ``train_freq=1``, one env and
-      plain SGD (``policy_kwargs=dict(optimizer_class=th.optim.SGD)``) this is the book's algorithm exactly:
-      the box of §10.2, whose updates at the end of an episode are made one by one (τ = T − n + 1, …, T − 1).
-      The book's linear methods are ``policy="LinearPolicy"`` (``LinearQPolicy``): q̂(s, a, w) = W_a x(s) with its
-      own SGD update W_a ← W_a + α[G − q̂]x(S_t), without autograd (over ``TileCoding``, over the active tiles as the
-      book's code does).
+    - ``"batch"`` (the default, what the tuned settings were found with): ``gradient_steps`` gradient steps on the
+      *mean* loss of the transitions, as DQN does with a minibatch;
+    - ``"per_step"``: each transition's own update with the full step size α, in time order (episode ends included),
+      ``gradient_steps`` passes. With ``train_freq=1``, one env and plain SGD this is the box of §10.2 to the last bit;
+      ``policy="LinearPolicy"`` (``LinearQPolicy``) is the book's linear q̂ with its own SGD update.
 
-    The targets of an update are computed with the weights at its start. With ``train_freq=1`` and one env, the
-    transitions that complete together are those of an episode's end, whose targets do not bootstrap, so the
-    per-step mode is the book's update to the last bit; with more envs or a longer ``train_freq`` the later
-    transitions of an update bootstrap from weights a few updates old.
+    Options that are not in §10.2's algorithm (all off by default): a slowly-moving bootstrap network
+    (``target_update_interval``, ``tau``: SB3's DQN names), truncated λ-returns G^λ_{t:t+n} (``td_lambda``, §12.3, as
+    CleanRL's PQN), LayerNorm (``policy_kwargs=dict(layer_norm=True)``), and a greedy policy from a Polyak average of
+    q̂'s weights (``averaging_tau``), which keeps a q̂ that passes through a bad state for an update or two from showing
+    it in evaluations.
 
-    Why batch by default: on the tuned settings (8 envs, 16 steps each, 8 gradient steps on 128 transitions) the
-    mean is what Adam and the learning rates were tuned for, and one gradient step on 128 transitions costs about as
-    much as one on a single transition: the per-step mode would take 128× more gradient steps for the same data
-    (the benchmarks' learning curves in ``benchmarks/results/learning.md`` are the batch mode's).
-
-    Options that are not in §10.2's algorithm, for neural networks (all off by default, so the book's algorithm is the
-    default): a slowly-moving bootstrap network (``target_update_interval``, ``tau``: SB3's DQN names), truncated
-    λ-returns G^λ_{t:t+n} as targets (``td_lambda``, §12.3; CleanRL's PQN uses λ-returns), LayerNorm in the
-    Q-network (``policy_kwargs=dict(layer_norm=True)``, as PQN), and a greedy policy (``predict``) from a Polyak
-    average of q̂'s weights (``averaging_tau``), which keeps a q̂ that passes through a bad state for an update or two
-    from showing it in evaluations (the −500 loops of Acrobot-v1's greedy policy).
-
-    The greedy action breaks ties at random (as the book's ``argmax`` does), so that a q̂ initialised to a constant
-    does not always pick the first action; ``predict(deterministic=True)`` picks the first of tied actions, so that it
-    stays reproducible.
-
-    At a time-limit truncation the target bootstraps from the final state with the expectation of q̂ under the
-    current ε-greedy policy, (1 − ε) max_a q̂ + ε mean_a q̂: no action is taken there, and the expectation is the
-    lower-variance estimate of the value of the one the policy would take. With ``expected_sarsa=True``, every
-    bootstrap uses that expectation (n-step Expected SARSA, eq. 7.7–7.8).
-
-    The defaults learn CartPole-v1 in 100k steps on one env (from the tuning behind ``hyperparams/nstep_sarsa.yml``,
-    whose per-env settings are better still); the seed report's per-step settings are ``train_freq=1``,
-    ``gradient_steps=1``, ``n_steps=10`` (CartPole-v1) or 5 (Acrobot-v1), ``learning_rate=5e-4``.
+    The greedy action breaks ties at random (the book's ``argmax``), except in ``predict(deterministic=True)``, which
+    takes the first so that it stays reproducible. At a time-limit truncation the target bootstraps from the final
+    state with the ε-greedy expectation (1 − ε) max_a q̂ + ε mean_a q̂ (eq. 7.8: no action is taken there); with
+    ``expected_sarsa=True`` every bootstrap does (n-step Expected SARSA, eq. 7.7).
 
     :param policy: the policy model to use (``"MlpPolicy"``, ``"CnnPolicy"``, ``"MultiInputPolicy"``, or
         ``"LinearPolicy"``: the book's linear q̂ with its own SGD update, ``LinearQPolicy``)
@@ -281,86 +241,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
 
     def _check_arguments(self) -> None:
         super()._check_arguments()
-        check_positive_int("n_steps", self.n_steps, hint="n=1 is one-step SARSA; the seed report used 5 and 10")
-        check_positive_int(
-            "train_freq",
-            self.train_freq,
-            hint="It counts env steps per env; SB3's tuple form (4, 'step') is not supported, and there is no 'episode' unit",
-        )
-        check_positive_int(
-            "gradient_steps",
-            self.gradient_steps,
-            hint="A count per update; SB3's DQN's -1 (as many as the env steps of the rollout) would be train_freq here",
-        )
-        check_choice("update_mode", self.update_mode, ("batch", "per_step"))
-        if callable(self.exploration_schedule):
-            for name, value, unused in (
-                ("exploration_initial_eps", self.exploration_initial_eps, DEFAULT_EXPLORATION_INITIAL_EPS),
-                ("exploration_final_eps", self.exploration_final_eps, DEFAULT_EXPLORATION_FINAL_EPS),
-                ("exploration_fraction", self.exploration_fraction, None),
-                ("exploration_decay_rate", self.exploration_decay_rate, DEFAULT_EXPLORATION_DECAY_RATE),
-            ):
-                if value != unused:
-                    raise ValueError(
-                        f"{name}={value!r} belongs to the 'linear' or 'exponential' ε schedule, but exploration_schedule="
-                        f"{self.exploration_schedule!r} is a schedule of your own, which would ignore it: drop {name} "
-                        "(your schedule gives every ε)"
-                    )
-        else:
-            check_choice(
-                "exploration_schedule",
-                self.exploration_schedule,
-                ("exponential", "linear"),
-                hint="Or a schedule: a callable of the progress remaining, e.g. stable_baselines3.common.utils.LinearSchedule",
-            )
-        check_range("exploration_initial_eps", self.exploration_initial_eps, 0.0, 1.0)
-        check_range("exploration_final_eps", self.exploration_final_eps, 0.0, 1.0)
-        if self.exploration_fraction is not None:
-            check_range("exploration_fraction", self.exploration_fraction, 0.0, 1.0, low_open=True)
-        if self.exploration_fraction is not None and self.exploration_schedule == "exponential":
-            raise ValueError(
-                f"exploration_fraction={self.exploration_fraction!r} is the linear schedule's (SB3's DQN), but "
-                "exploration_schedule is 'exponential' (ε ← max(ε_final, ε · exploration_decay_rate) per episode; "
-                "the constructor's default), which would ignore it. Pass exploration_schedule='linear' as well to "
-                "decay ε linearly over that fraction of training, or drop exploration_fraction"
-            )
-        check_range("exploration_decay_rate", self.exploration_decay_rate, 0.0, 1.0, low_open=True)
-        if self.exploration_schedule == "linear" and self.exploration_decay_rate != DEFAULT_EXPLORATION_DECAY_RATE:
-            raise ValueError(
-                f"exploration_decay_rate={self.exploration_decay_rate!r} is the exponential schedule's (ε ← max(ε_final, "
-                "ε · exploration_decay_rate) per episode), but exploration_schedule is 'linear' (ε from initial to final "
-                "over exploration_fraction of training), which would ignore it. Pass exploration_schedule='exponential' "
-                "to decay ε per episode, or drop exploration_decay_rate"
-            )
-        if self.exploration_schedule == "exponential" and self.exploration_initial_eps < self.exploration_final_eps:
-            raise ValueError(
-                f"exploration_initial_eps={self.exploration_initial_eps!r} is below exploration_final_eps="
-                f"{self.exploration_final_eps!r}: the exponential schedule (ε ← max(ε_final, ε · exploration_decay_rate)) "
-                f"would run at ε = {self.exploration_final_eps!r} from the start. For a constant ε (the book's ε = 0), "
-                "set both to it; for an ε that grows, exploration_schedule='linear'"
-            )
-        check_choice("loss_function", self.loss_function, ("mse", "huber"))
-        check_range("td_lambda", self.td_lambda, 0.0, 1.0, hint="1.0 is the n-step return G_{t:t+n} (S&B §10.2)")
-        if self.target_update_interval is not None:
-            check_positive_int("target_update_interval", self.target_update_interval, hint="Pass None for no target network")
-        check_range("tau", self.tau, 0.0, 1.0, low_open=True, hint="1.0 copies q̂ at every target update")
-        if self.target_update_interval is None and self.tau != 1.0:
-            raise ValueError(
-                f"tau={self.tau!r} is the soft update coefficient of the bootstrap network, but target_update_interval is "
-                "None, so there is none (the targets bootstrap from q̂ itself, as the book's do) and tau would be ignored. "
-                "Pass target_update_interval as well (env steps between two moves of the copy towards q̂, e.g. 1: after "
-                "every update; SB3's DQN uses 10000), or drop tau"
-            )
-        check_bool("expected_sarsa", self.expected_sarsa)
-        if self.averaging_tau is not None:
-            check_range(
-                "averaging_tau",
-                self.averaging_tau,
-                0.0,
-                1.0,
-                low_open=True,
-                hint="e.g. 0.05 (an average over about 20 updates), or None for the greedy policy of q̂ itself",
-            )
+        check_arguments(self, ARGUMENT_RULES)
 
     def _initial_buffer_size(self) -> int:
         # At most n_steps transitions per env wait for their targets between updates
@@ -384,17 +265,6 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
 
     def _make_policy(self) -> BasePolicy:
         self._refuse_policy_kwargs_set_here(target_network="target_update_interval", averaged_network="averaging_tau")
-        if issubclass(self.policy_class, LinearQPolicy):
-            for name, value, plain in (
-                ("loss_function", self.loss_function, "mse"),
-                ("max_grad_norm", self.max_grad_norm, math.inf),
-            ):
-                if value not in (plain, None):
-                    raise ValueError(
-                        f"{name}={value!r}: LinearPolicy's update is plain SGD on ½(G − q̂)² (S&B eq. 10.5), without "
-                        f"it. Drop {name}, or use 'MlpPolicy' with policy_kwargs=dict(net_arch=[]) for a linear q̂ "
-                        "trained through autograd"
-                    )
         target_network = self.target_update_interval is not None
         return self.policy_class(
             self.observation_space,
@@ -646,10 +516,10 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         """
         target, average = self.policy.q_net_target, self.policy.q_net_average
         if target is not None and self.num_timesteps - self._target_updated_at >= (self.target_update_interval or 0):
-            _polyak_update(self.policy.q_net, target, self.tau, self.policy.mode_dependent)
+            self.policy.polyak_update(target, self.tau)
             self._target_updated_at = self.num_timesteps
         if average is not None and self.averaging_tau is not None:
-            _polyak_update(self.policy.q_net, average, self.averaging_tau, self.policy.mode_dependent)
+            self.policy.polyak_update(average, self.averaging_tau)
 
     def _on_learn_start(self) -> None:
         if isinstance(self.policy, LinearQPolicy):

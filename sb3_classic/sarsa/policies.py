@@ -17,7 +17,7 @@ from stable_baselines3.common.torch_layers import (
     create_mlp,
 )
 from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
-from stable_baselines3.common.utils import obs_as_tensor
+from stable_baselines3.common.utils import get_parameters_by_name, obs_as_tensor, polyak_update
 from stable_baselines3.dqn.policies import QNetwork
 from torch import nn
 
@@ -172,6 +172,22 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         frozen.requires_grad_(False)
         frozen.set_training_mode(False)
         return frozen
+
+    def polyak_update(self, copy: QNetwork, tau: float) -> None:
+        """
+        Move a copy of q̂ towards it: w' ← τw + (1 − τ)w' of the parameters (SB3's ``polyak_update``), and the running
+        statistics of normalisation layers (BatchNorm's ``running_mean``, ``running_var``) copied, as SB3's DQN copies
+        them to its target network: they are not parameters, and a copy whose statistics never moved normalises
+        otherwise (looked for only where ``mode_dependent``: the walk over the state dict costs more than the update of
+        a small q̂).
+
+        :param copy: ``q_net_target`` or ``q_net_average``
+        :param tau: the coefficient τ, in (0, 1]
+        """
+        polyak_update(self.q_net.parameters(), copy.parameters(), tau)
+        if self.mode_dependent:
+            statistics = get_parameters_by_name(self.q_net, ["running_"])
+            polyak_update(statistics, get_parameters_by_name(copy, ["running_"]), 1.0)
 
     @property
     def device(self) -> th.device:
