@@ -208,11 +208,10 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
     def q_values(self, observations: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
         """
         :param observations: a batch of observations, as a VecEnv returns them
-        :return: q̂(s, ·, w) of each, shape (batch, n_actions), float32, without gradient: what the ε-greedy behaviour
-            policy of ``NStepSARSA`` chooses from
+        :return: q̂(s, ·, w) of each, shape (batch, n_actions), float32, detached: what the ε-greedy behaviour policy of
+            ``NStepSARSA`` chooses from (call it under ``th.no_grad()``, as the rollout loop does, to build no graph)
         """
-        with th.no_grad():
-            return self.q_net(obs_as_tensor(observations, self.device)).cpu().numpy()
+        return self.q_net(obs_as_tensor(observations, self.device)).detach().cpu().numpy()
 
     def forward(self, obs: PyTorchObs, deterministic: bool = True) -> th.Tensor:
         """:return: the greedy actions argmax_a q̂(obs, a)"""
