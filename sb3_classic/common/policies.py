@@ -13,6 +13,7 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.torch_layers import CombinedExtractor, FlattenExtractor, NatureCNN
+from stable_baselines3.common.type_aliases import PyTorchObs
 from stable_baselines3.dqn.policies import QNetwork
 from torch import nn
 
@@ -113,8 +114,8 @@ class EnvActionsMixin:
         self, observation: np.ndarray | dict[str, np.ndarray], deterministic: bool, action_masks: np.ndarray
     ) -> np.ndarray:
         """
-        ``BasePolicy.predict`` with masks, as sb3-contrib's ``MaskableActorCriticPolicy.predict``: the policy's
-        ``_predict`` takes them.
+        ``BasePolicy.predict`` with masks, as sb3-contrib's ``MaskableActorCriticPolicy.predict`` (whose ``_predict``
+        takes them); here the policy's ``_predict_masked`` does.
 
         :return: the actions as indices, shape (batch, *action_shape), or action_shape for one observation
         """
@@ -124,9 +125,18 @@ class EnvActionsMixin:
         first = next(iter(obs_tensor.values())) if isinstance(obs_tensor, dict) else obs_tensor
         masks = check_action_masks(action_masks, len(first), self.action_space)
         with th.no_grad():
-            actions_tensor = policy._predict(obs_tensor, deterministic=deterministic, action_masks=masks)  # type: ignore[call-arg]
+            actions_tensor = self._predict_masked(obs_tensor, deterministic, masks)
         assert self.action_space.shape is not None
         actions: np.ndarray = actions_tensor.cpu().numpy().reshape((-1, *self.action_space.shape))
         if not vectorized_env:
             actions = actions.squeeze(axis=0)
         return actions
+
+    def _predict_masked(self, observation: PyTorchObs, deterministic: bool, action_masks: np.ndarray) -> th.Tensor:
+        """
+        :param observation: the observations, as tensors
+        :param deterministic: whether to take the most likely actions
+        :param action_masks: the legal actions of each, shape (batch, mask_size), boolean
+        :return: the actions, as indices
+        """
+        raise NotImplementedError(f"{type(self).__name__} takes no action masks")

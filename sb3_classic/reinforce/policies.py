@@ -239,8 +239,12 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         if isinstance(self.action_space, spaces.MultiBinary):
             # Bernoulli logit l of each dimension as the categorical logits (0, l): soft-max gives 1 − σ(l), σ(l)
             action_logits = th.stack([th.zeros_like(action_logits), action_logits], dim=-1).flatten(1)
+        masks = th.as_tensor(action_masks, dtype=th.bool, device=action_logits.device).reshape(action_logits.shape)
+        # The illegal logits at sb3-contrib's −1e8 before the distribution is built too: their gradient is then exactly
+        # 0 (sb3-contrib masks the normalised logits, whose normaliser leaves a gradient of rounding size)
+        action_logits = th.where(masks, action_logits, th.tensor(-1e8, dtype=action_logits.dtype, device=masks.device))
         distribution = self.masked_action_dist.proba_distribution(action_logits)
-        distribution.apply_masking(action_masks)
+        distribution.apply_masking(masks)
         return distribution
 
     def get_distribution(self, obs: PyTorchObs, action_masks: th.Tensor | np.ndarray | None = None) -> Distribution:
@@ -267,6 +271,10 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         :return: the actions, as indices
         """
         return self.get_distribution(observation, action_masks).get_actions(deterministic=deterministic)
+
+    def _predict_masked(self, observation: PyTorchObs, deterministic: bool, action_masks: np.ndarray) -> th.Tensor:
+        """``_predict`` with masks (``EnvActionsMixin.predict``'s hook)."""
+        return self._predict(observation, deterministic, action_masks)
 
     def release_distributions(self) -> None:
         """

@@ -483,16 +483,13 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
 
     def _sample_masked_actions(self, obs: np.ndarray | dict[str, np.ndarray], action_masks: np.ndarray) -> np.ndarray:
         """
-        ``_sample_actions`` with masks: ε-greedy over the legal actions of each env.
+        ``_sample_actions`` with masks: ε-greedy over the legal actions of each env, greedy in q̂ (a policy's own
+        ``_predict`` is not asked: the env's masks say what is legal).
 
         :param obs: the current observations of all envs
         :param action_masks: their legal actions, shape (n_envs, n_actions)
         :return: one action index per env
         """
-        if self.policy.own_predict:
-            # A subclass's greedy policy, given the masks
-            own = self.policy._predict(obs_as_tensor(obs, self.device), deterministic=False, action_masks=action_masks)
-            return self._epsilon_greedy(own.cpu().numpy().reshape(-1), action_masks=action_masks)
         q_values = self.policy.q_values(obs)
         if self.update_mode == "per_step":
             self._rollout_q_values = RolloutQValues(q_values, self._n_updates, self.num_timesteps)

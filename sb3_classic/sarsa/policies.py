@@ -239,27 +239,31 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         """The network of the greedy policy (``predict``): ``q_net_average`` if there is one, else q̂ itself."""
         return self.q_net if self.q_net_average is None else self.q_net_average
 
-    def _predict(
-        self, observation: PyTorchObs, deterministic: bool = True, action_masks: np.ndarray | None = None
-    ) -> th.Tensor:
+    def _predict(self, observation: PyTorchObs, deterministic: bool = True) -> th.Tensor:
         """
         :param observation: the observations
         :param deterministic: the first of tied greedy actions (reproducible); False: one of them at random, as the
             behaviour policy breaks ties (``greedy_random_ties``, NumPy's global RNG): a q̂ of zeros (the book's
             Mountain Car) would otherwise always pick action 0
-        :param action_masks: the legal actions of each observation, shape (batch, n_actions), boolean (sb3-contrib's
-            masks); None: all legal
-        :return: the greedy actions argmax_a q̂(obs, a) of ``greedy_net``, over the legal actions
+        :return: the greedy actions argmax_a q̂(obs, a) of ``greedy_net``
         """
-        if action_masks is not None:
-            # Illegal actions at −∞: never the argmax while some action is legal
-            q_masked = np.where(action_masks, self.greedy_net(observation).cpu().numpy(), -np.inf)
-            greedy = q_masked.argmax(axis=1) if deterministic else greedy_random_ties(q_masked)
-            return th.as_tensor(greedy, device=self.device)
         if deterministic:
             return self.greedy_net._predict(observation, deterministic=True)
         q_values = self.greedy_net(observation)
         return th.as_tensor(greedy_random_ties(q_values.cpu().numpy()), device=q_values.device)
+
+    def _predict_masked(self, observation: PyTorchObs, deterministic: bool, action_masks: np.ndarray) -> th.Tensor:
+        """
+        :param observation: the observations
+        :param deterministic: the first of tied greedy actions; False: one of them at random (as ``_predict``)
+        :param action_masks: the legal actions of each observation, shape (batch, n_actions), boolean (sb3-contrib's
+            masks)
+        :return: the greedy actions argmax_{a legal} q̂(obs, a) of ``greedy_net``
+        """
+        # Illegal actions at −∞: never the argmax while some action is legal
+        q_masked = np.where(action_masks, self.greedy_net(observation).cpu().numpy(), -np.inf)
+        greedy = q_masked.argmax(axis=1) if deterministic else greedy_random_ties(q_masked)
+        return th.as_tensor(greedy, device=self.device)
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = super()._get_constructor_parameters()
