@@ -253,7 +253,7 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
 
         :param obs: observations
         :param action_masks: the legal actions of each observation, shape (batch, mask_size); None: all legal
-        :return: π(·|obs, θ), masked
+        :return: the policy's distribution of the actions in ``obs``, masked
         """
         if not self._masks_restrict(action_masks):
             return super().get_distribution(obs)
