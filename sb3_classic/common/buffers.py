@@ -26,6 +26,10 @@ class TrajectorySamples(NamedTuple):
     final_observations: Observations
     episode_steps: np.ndarray
     pending: np.ndarray
+    #: the masks of S_t (``[t, env, mask_size]``), if the buffer stores masks
+    action_masks: np.ndarray | None = None
+    #: the masks of the final states of truncations, if the buffer stores masks
+    final_action_masks: np.ndarray | None = None
 
 
 class TrainingBatch(NamedTuple):
@@ -44,6 +48,8 @@ class TrainingBatch(NamedTuple):
     episode_steps: np.ndarray
     #: how many of each env's first pending transitions they are, shape (n_envs,): marked trained after the update
     n_trained: np.ndarray
+    #: the masks of S_t, shape (B, mask_size), boolean, if the buffer stores masks
+    action_masks: np.ndarray | None = None
 
 
 def select(observations: Observations, index: Any) -> Observations:
@@ -112,10 +118,14 @@ class TrajectoryBuffer(BaseBuffer):
     :param action_space: action space
     :param device: PyTorch device of the tensors the algorithms build from this buffer
     :param n_envs: number of parallel environments
+    :param mask_size: store the action masks of every S_t and of the final states of truncations, with this many
+        entries each (``set_mask_size``); None (the default): no masks
     """
 
     observations: Observations
     final_observations: Observations
+    action_masks: np.ndarray | None
+    final_action_masks: np.ndarray | None
 
     def __init__(
         self,
@@ -124,8 +134,10 @@ class TrajectoryBuffer(BaseBuffer):
         action_space: spaces.Space,
         device: th.device | str = "auto",
         n_envs: int = 1,
+        mask_size: int | None = None,
     ):
         super().__init__(buffer_size, observation_space, action_space, device, n_envs=n_envs)
+        self.mask_size = mask_size
         # Integer actions (Discrete, MultiDiscrete) stay integers: they index logits and Q-values
         integer_actions = isinstance(action_space, (spaces.Discrete, spaces.MultiDiscrete))
         self.action_dtype = np.int64 if integer_actions else np.float32
@@ -143,8 +155,29 @@ class TrajectoryBuffer(BaseBuffer):
         self.dones = np.zeros(shape, dtype=bool)
         self.truncated = np.zeros(shape, dtype=bool)
         self.episode_steps = np.zeros(shape, dtype=np.int64)
+        self.action_masks = self.final_action_masks = None
+        if self.mask_size is not None:
+            # All legal where nothing was written (a final state whose env reported no mask)
+            self.action_masks = np.ones((*shape, self.mask_size), dtype=bool)
+            self.final_action_masks = np.ones((*shape, self.mask_size), dtype=bool)
         self.buffer_size = capacity
         # (the list, made once: _drop_rows runs at every update)
+        self._stored_arrays = self._arrays()
+
+    def set_mask_size(self, mask_size: int | None) -> None:
+        """
+        Start or stop storing action masks. The steps stored before masks are stored count as allowing every action.
+
+        :param mask_size: entries per mask, or None to store none
+        """
+        if mask_size == self.mask_size:
+            return
+        self.mask_size = mask_size
+        self.action_masks = self.final_action_masks = None
+        if mask_size is not None:
+            shape = (self.buffer_size, self.n_envs, mask_size)
+            self.action_masks = np.ones(shape, dtype=bool)
+            self.final_action_masks = np.ones(shape, dtype=bool)
         self._stored_arrays = self._arrays()
 
     def reset(self) -> None:
@@ -163,6 +196,8 @@ class TrajectoryBuffer(BaseBuffer):
         dones: np.ndarray,
         truncated: np.ndarray,
         final_observations: dict[int, Any],
+        action_masks: np.ndarray | None = None,
+        final_action_masks: dict[int, np.ndarray] | None = None,
     ) -> None:
         """
         Append one step of every env.
@@ -173,6 +208,9 @@ class TrajectoryBuffer(BaseBuffer):
         :param dones: whether the episode ended with this step
         :param truncated: whether it ended by a time limit (its final state is then bootstrapped from)
         :param final_observations: S_{t+1} of the truncated envs, by env index
+        :param action_masks: the masks of S_t, shape (n_envs, mask_size), if the buffer stores masks
+        :param final_action_masks: the masks of the final states of truncated envs that reported one, by env index
+            (the others count as allowing every action)
         """
         if self.pos == self.buffer_size:
             self._grow()
@@ -185,6 +223,13 @@ class TrajectoryBuffer(BaseBuffer):
         self.episode_steps[row] = self.episode_length
         for env_idx, final_obs in final_observations.items():
             _write(self.final_observations, (row, env_idx), final_obs)
+        if self.action_masks is not None:
+            assert self.final_action_masks is not None
+            assert action_masks is not None
+            self.action_masks[row] = action_masks
+            self.final_action_masks[row] = True
+            for env_idx, final_masks in (final_action_masks or {}).items():
+                self.final_action_masks[row, env_idx] = final_masks
         self.episode_length += 1
         self.episode_length[dones] = 0
         self.pos += 1
@@ -215,6 +260,8 @@ class TrajectoryBuffer(BaseBuffer):
             final_observations=select(self.final_observations, rows),
             episode_steps=self.episode_steps[rows],
             pending=np.arange(self.pos)[:, None] >= self.start,
+            action_masks=None if self.action_masks is None else self.action_masks[rows],
+            final_action_masks=None if self.final_action_masks is None else self.final_action_masks[rows],
         )
 
     def mark_trained(self, n_trained: np.ndarray) -> None:
@@ -250,6 +297,8 @@ class TrajectoryBuffer(BaseBuffer):
 
     def _arrays(self) -> list[np.ndarray]:
         arrays = [self.actions, self.rewards, self.dones, self.truncated, self.episode_steps]
+        if self.action_masks is not None and self.final_action_masks is not None:
+            arrays += [self.action_masks, self.final_action_masks]
         for observations in (self.observations, self.final_observations):
             arrays += list(observations.values()) if isinstance(observations, dict) else [observations]
         return arrays

@@ -30,10 +30,17 @@ from sb3_classic.common.env_checks import (
     warn_episodes_cut,
     warn_truncation_without_final_observation,
 )
+from sb3_classic.common.masking import (
+    check_action_masks,
+    check_some_action_legal,
+    get_action_masks,
+    is_masking_supported,
+    mask_segments,
+)
 from sb3_classic.common.policies import action_offset
 from sb3_classic.common.save_util import SafeSaveLoadMixin, episodes_not_continued
 from sb3_classic.common.schedules import StepDecay
-from sb3_classic.common.utils import check_positive_int
+from sb3_classic.common.utils import check_bool, check_positive_int
 
 SelfClassicOnPolicyAlgorithm = TypeVar("SelfClassicOnPolicyAlgorithm", bound="ClassicOnPolicyAlgorithm")
 
@@ -50,6 +57,10 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
       episodes or updates, like PyTorch's ``StepLR``), and that training state kept across ``learn()``
       calls and ``save``/``load``;
     - ``set_env`` with another number of envs;
+    - invalid-action masking through sb3-contrib's interface (``learn(use_masking=...)``, see ``_setup_masking``):
+      the masks of each S_t travel with it in the buffer, and the final state of a time-limit truncation takes the
+      mask its env reports in ``info["action_mask"]`` (the VecEnv has reset the env when the masks are next read, so
+      ``action_masks()`` then gives the next episode's), or allows every action if it reports none;
     - ``save``, ``load`` and ``set_parameters`` that leave no file or model half-changed (``SafeSaveLoadMixin``).
 
     :param policy: the policy model to use (``"MlpPolicy"``, ``"CnnPolicy"``, ``"MultiInputPolicy"`` or a class)
@@ -154,6 +165,8 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
         # The episodes completed before the current rollout: an update's learning-rate decay counts those, as PyTorch's
         # StepLR does when stepped after each episode's updates (the episodes ending in the rollout decay the next one)
         self._episodes_before_rollout = 0
+        # Whether the rollouts read the envs' action masks: decided by each learn() call
+        self._use_masking = False
         if self.env is not None and not isinstance(self.action_space, supported_action_spaces):
             raise ValueError(self._unsupported_action_space_message(supported_action_spaces))
 
@@ -260,13 +273,44 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
             th.nn.utils.clip_grad_norm_(parameters, self.max_grad_norm)
 
     @abstractmethod
-    def _sample_actions(self, obs: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
+    def _sample_actions(self, obs: np.ndarray | dict[str, np.ndarray], action_masks: np.ndarray | None = None) -> np.ndarray:
         """
         The behaviour policy of the per-step loop: one action per env, as a NumPy array the env accepts. Called
         without gradient (``th.no_grad``).
 
         :param obs: the current observations of all envs, as the VecEnv returned them
+        :param action_masks: their action masks, shape (n_envs, mask_size), boolean, each allowing some action;
+            None when masking is off
         """
+
+    def _read_action_masks(self, env: VecEnv) -> np.ndarray:
+        """
+        :param env: the training environment
+        :return: the masks of the envs' current observations (sb3-contrib's ``get_action_masks``), shape
+            (n_envs, mask_size), boolean
+        :raises ValueError: if they have another shape, or one allows no action (naming the env and the step)
+        """
+        masks = check_action_masks(get_action_masks(env), env.num_envs, self.action_space, "action_masks()")
+        check_some_action_legal(masks, self.action_space, self.rollout_buffer.episode_length)
+        return masks
+
+    def _final_action_masks(self, infos: list[dict[str, Any]], final_observations: dict[int, Any]) -> dict[int, np.ndarray]:
+        """
+        :param infos: the step's infos
+        :param final_observations: the final observations bootstrapped from, by env
+        :return: the masks of those final states that their envs report in ``info["action_mask"]``, by env (the
+            others allow every action)
+        :raises ValueError: if one has the wrong shape or allows no action
+        """
+        masks: dict[int, np.ndarray] = {}
+        for idx in final_observations:
+            if infos[idx].get("action_mask") is not None:
+                name = f'info["action_mask"] of env {idx}'
+                mask = check_action_masks(infos[idx]["action_mask"], 1, self.action_space, name)
+                where = f"the final state of its episode (step {int(self.rollout_buffer.episode_length[idx]) + 1})"
+                check_some_action_legal(mask, self.action_space, np.zeros(1, dtype=np.int64), where)
+                masks[idx] = mask[0]
+        return masks
 
     @abstractmethod
     def _rollout_complete(self, n_steps: int, n_episodes: int) -> bool:
@@ -344,14 +388,18 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
         self._episodes_before_rollout = self._completed_episodes
         callback.on_rollout_start()
         n_steps, n_episodes = 0, 0
+        use_masking, action_masks, final_action_masks = self._use_masking, None, None
         while True:
             if n_rollout_steps is None:
                 if self._rollout_complete(n_steps, n_episodes):
                     break
             elif n_steps >= n_rollout_steps:
                 break
+            if use_masking:
+                # Read before the action is chosen, as sb3-contrib's MaskablePPO reads them
+                action_masks = self._read_action_masks(env)
             with th.no_grad():
-                actions = self._sample_actions(self._last_obs)  # type: ignore[arg-type]
+                actions = self._sample_actions(self._last_obs, action_masks)  # type: ignore[arg-type]
             env_actions = actions
             if self._action_offset is not None:
                 # The buffer and the networks use indices 0..n-1, the env its own values start..start+n-1
@@ -378,9 +426,21 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
                     raise_non_finite(self, episode_length, rewards, "reward")
                 raise_non_finite(self, episode_length, new_obs, "observation", after_reset=dones)  # type: ignore[arg-type]
             ends, truncated, final_observations = self._episode_ends(new_obs, dones, infos)  # type: ignore[arg-type]
+            if use_masking and final_observations:
+                final_action_masks = self._final_action_masks(infos, final_observations)
             # Stored even when the callback stops training, so that the buffer and the envs stay in step: the next
             # learn() goes on from the step the envs are at
-            rollout_buffer.add(self._last_obs, actions, rewards, ends, truncated, final_observations)  # type: ignore[arg-type]
+            rollout_buffer.add(
+                self._last_obs,  # type: ignore[arg-type]
+                actions,
+                rewards,
+                ends,
+                truncated,
+                final_observations,
+                action_masks,
+                final_action_masks,
+            )
+            final_action_masks = None
             self._last_obs = new_obs  # type: ignore[assignment]
             # The training episodes' starts: an episode cut at max_episode_length starts a new one where the env goes on
             # (with the env's dones, the next learn() would take the cut for the start of an episode missing from the buffer)
@@ -404,6 +464,7 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
         tb_log_name: str = "ClassicOnPolicyAlgorithm",
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,
+        use_masking: bool = True,
     ) -> SelfClassicOnPolicyAlgorithm:
         if log_interval is not None:
             # Before anything is set up: SB3's loop would divide by it after the first rollout
@@ -418,6 +479,7 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
                 f"{type(self).__name__}.learn: this model has no env to train on (it was loaded without one): pass env=... "
                 f"to {type(self).__name__}.load, or call model.set_env(env) first"
             )
+        self._setup_masking(use_masking)
         iteration = 0
         total_timesteps, callback = self._setup_learn(
             total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar
@@ -443,6 +505,25 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
         callback.on_training_end()
         return self
 
+    def _setup_masking(self, use_masking: bool) -> None:
+        """
+        Decide whether this ``learn()`` call reads action masks: when asked to and the env supports them (it, or a
+        wrapper of it such as sb3-contrib's ``ActionMasker``, has ``action_masks()``), as MaskablePPO decides.
+
+        :param use_masking: ``learn``'s argument
+        :raises ValueError: if the env has masks for an action space that cannot be masked (``Box``)
+        """
+        check_bool("use_masking", use_masking)
+        assert self.env is not None
+        self._use_masking = bool(use_masking) and is_masking_supported(self.env)
+        segments = mask_segments(self.action_space) if self._use_masking else None
+        if self._use_masking and segments is None:
+            raise ValueError(
+                f"The env has action_masks(), but {self.action_space} actions cannot be masked (sb3-contrib masks "
+                "Discrete, MultiDiscrete and MultiBinary actions): pass learn(..., use_masking=False)"
+            )
+        self.rollout_buffer.set_mask_size(None if segments is None else sum(segments))
+
     def dump_logs(self, iteration: int = 0) -> None:
         """
         SB3's ``OnPolicyAlgorithm.dump_logs``, with ``time/episodes``: the episodes completed so far, all envs
@@ -452,6 +533,10 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
         """
         self.logger.record("time/episodes", self._completed_episodes, exclude="tensorboard")
         super().dump_logs(iteration)
+
+    def _excluded_save_params(self) -> list[str]:
+        # Decided by each learn() call from its env: a loaded model predicts with masks or without
+        return [*super()._excluded_save_params(), "_use_masking"]
 
     def _log_interval_choices(self) -> str:
         """:return: the values of ``learn(log_interval=...)`` beyond a count and None, for its error message"""

@@ -373,6 +373,25 @@ def epsilon_greedy_expectation(q_values: np.ndarray | float, epsilon: float) -> 
     return (1.0 - epsilon) * q.max(axis=-1) + epsilon * q.mean(axis=-1)
 
 
+def masked_epsilon_greedy_expectation(q_values: np.ndarray, action_masks: np.ndarray, epsilon: float) -> np.ndarray:
+    """
+    V̄(s) = Σ_a π(a|s) q̂(s, a) under the ε-greedy policy over the legal actions L(s) (Sutton & Barto eq. 7.8):
+    π(a|s) = (1 − ε)·1[a greedy among L(s)] + ε/|L(s)| for a in L(s), 0 otherwise. So
+    V̄(s) = (1 − ε) max_{a ∈ L(s)} q̂(s, a) + ε mean_{a ∈ L(s)} q̂(s, a): an illegal action's q̂ never enters it. With
+    every action legal it is ``epsilon_greedy_expectation`` to the bit.
+
+    :param q_values: q̂(s, ·), shape (..., n_actions)
+    :param action_masks: the legal actions, shape (..., n_actions), boolean, each row with at least one
+    :param epsilon: exploration rate ε
+    :return: V̄(s), shape (...)
+    """
+    q = np.asarray(q_values)
+    greedy = np.where(action_masks, q, -np.inf).max(axis=-1)
+    # The mean as NumPy's mean computes it (a sum, then a division in q's precision)
+    mean = np.where(action_masks, q, 0).sum(axis=-1) / np.count_nonzero(action_masks, axis=-1).astype(q.dtype)
+    return (1.0 - epsilon) * greedy + epsilon * mean
+
+
 def greedy_random_ties(q_values: np.ndarray) -> np.ndarray:
     """
     argmax_a q̂(s, a) for each row, ties broken uniformly at random (S&B §2.2: "ties broken arbitrarily", which the

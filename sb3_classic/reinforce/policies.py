@@ -2,14 +2,17 @@
 
 from typing import Any
 
+import numpy as np
 import torch as th
 from gymnasium import spaces
-from stable_baselines3.common.distributions import CategoricalDistribution
+from sb3_contrib.common.maskable.distributions import MaskableDistribution, make_masked_proba_distribution
+from stable_baselines3.common.distributions import CategoricalDistribution, Distribution
 from stable_baselines3.common.policies import ActorCriticPolicy, BaseModel
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, CombinedExtractor, FlattenExtractor, NatureCNN
 from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from torch import nn
 
+from sb3_classic.common.masking import mask_segments
 from sb3_classic.common.policies import EnvActionsMixin
 from sb3_classic.common.torch_layers import (
     check_constant_init_is_linear,
@@ -32,6 +35,14 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
     features extractor) with separate optimizers, so each has its own learning rate (α^θ and α^w).
     The action distributions are SB3's (Discrete, Box, MultiDiscrete, MultiBinary); the networks work with action
     indices and ``predict`` returns the env's values (``start`` of ``Discrete``/``MultiDiscrete`` added).
+
+    With action masks (``get_distribution``, ``evaluate_actions``, ``sample_actions``, ``predict`` take
+    ``action_masks`` as sb3-contrib's ``MaskableActorCriticPolicy`` does), the distribution is sb3-contrib's
+    masked one (``MaskableCategoricalDistribution``, ``MaskableMultiCategoricalDistribution``; for MultiBinary,
+    ``MaskableBernoulliDistribution`` over the two logits (0, l) of each Bernoulli logit l, the same probabilities):
+    an illegal action has probability 0 and gets no gradient, and the entropy is over the legal actions. A batch
+    whose masks allow every action gets SB3's distribution itself (the same probabilities; sb3-contrib's would
+    normalise the logits a second time, which changes their last bit).
 
     :param observation_space: observation space
     :param action_space: action space
@@ -117,6 +128,10 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         self._sb3_distribution = all(getattr(type(self), hook) is getattr(REINFORCEPolicy, hook) for hook in hooks)
         #: Whether a subclass overrides ``forward``, whose actions SB3's A2C and PPO act with in their rollouts
         self._own_forward = type(self).forward is not REINFORCEPolicy.forward
+        #: sb3-contrib's masked distribution for masked actions (None for a space that cannot be masked: Box)
+        self.masked_action_dist: MaskableDistribution | None = None
+        if mask_segments(action_space) is not None:
+            self.masked_action_dist = make_masked_proba_distribution(action_space)
         self.activation_fn = activation_fn
         self.activation_kwargs = activation_kwargs
         self.weight_init = weight_init
@@ -182,17 +197,95 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         self._check_value_network("policy(obs) (forward)")
         return super().forward(obs, deterministic)
 
-    def evaluate_actions(self, obs: PyTorchObs, actions: th.Tensor) -> tuple[th.Tensor, th.Tensor, th.Tensor | None]:
+    def evaluate_actions(
+        self, obs: PyTorchObs, actions: th.Tensor, action_masks: th.Tensor | np.ndarray | None = None
+    ) -> tuple[th.Tensor, th.Tensor, th.Tensor | None]:
         """
-        SB3's ``ActorCriticPolicy.evaluate_actions``.
+        SB3's ``ActorCriticPolicy.evaluate_actions``, with sb3-contrib's ``action_masks``.
 
         :param obs: observations
         :param actions: actions, as SB3's distributions take them
+        :param action_masks: the legal actions of each observation, shape (batch, mask_size); None: all legal
         :return: v̂(obs, w) of shape (batch, 1), the actions' log-probabilities and the entropy of the distribution
+            (over the legal actions)
         :raises ValueError: for plain REINFORCE (``use_baseline=False``), which has no value network
         """
         self._check_value_network("evaluate_actions")
-        return super().evaluate_actions(obs, actions)
+        if not self._masks_restrict(action_masks):
+            return super().evaluate_actions(obs, actions)
+        assert action_masks is not None
+        features = self.extract_features(obs)
+        if self.share_features_extractor:
+            latent_pi, latent_vf = self.mlp_extractor(features)
+        else:
+            pi_features, vf_features = features
+            latent_pi = self.mlp_extractor.forward_actor(pi_features)
+            latent_vf = self.mlp_extractor.forward_critic(vf_features)
+        distribution = self._masked_distribution(self.action_net(latent_pi), action_masks)
+        return self.value_net(latent_vf), distribution.log_prob(actions), distribution.entropy()
+
+    def _masks_restrict(self, action_masks: th.Tensor | np.ndarray | None) -> bool:
+        """:return: whether there are masks and they make some action illegal"""
+        return action_masks is not None and not bool(action_masks.all())
+
+    def _masked_distribution(self, action_logits: th.Tensor, action_masks: th.Tensor | np.ndarray) -> MaskableDistribution:
+        """
+        :param action_logits: the outputs of ``action_net``, shape (batch, n_logits)
+        :param action_masks: the legal actions, shape (batch, mask_size)
+        :return: sb3-contrib's masked distribution of them
+        """
+        if self.masked_action_dist is None:
+            raise ValueError(f"action_masks: {self.action_space} actions cannot be masked; pass action_masks=None")
+        if isinstance(self.action_space, spaces.MultiBinary):
+            # Bernoulli logit l of each dimension as the categorical logits (0, l): soft-max gives 1 − σ(l), σ(l)
+            action_logits = th.stack([th.zeros_like(action_logits), action_logits], dim=-1).flatten(1)
+        masks = th.as_tensor(action_masks, dtype=th.bool, device=action_logits.device).reshape(action_logits.shape)
+        # The illegal logits at sb3-contrib's −1e8 before the distribution is built too: their gradient is then exactly
+        # 0 (sb3-contrib masks the normalised logits, whose normaliser leaves a gradient of rounding size)
+        action_logits = th.where(masks, action_logits, th.tensor(-1e8, dtype=action_logits.dtype, device=masks.device))
+        distribution = self.masked_action_dist.proba_distribution(action_logits)
+        distribution.apply_masking(masks)
+        return distribution
+
+    def get_distribution(self, obs: PyTorchObs, action_masks: th.Tensor | np.ndarray | None = None) -> Distribution:
+        """
+        SB3's ``ActorCriticPolicy.get_distribution``, with sb3-contrib's ``action_masks``.
+
+        :param obs: observations
+        :param action_masks: the legal actions of each observation, shape (batch, mask_size); None: all legal
+        :return: the policy's distribution of the actions in ``obs``, masked
+        """
+        if not self._masks_restrict(action_masks):
+            return super().get_distribution(obs)
+        assert action_masks is not None
+        features = BaseModel.extract_features(self, obs, self.pi_features_extractor)
+        return self._masked_distribution(self.action_net(self.mlp_extractor.forward_actor(features)), action_masks)
+
+    def _predict(
+        self, observation: PyTorchObs, deterministic: bool = False, action_masks: np.ndarray | None = None
+    ) -> th.Tensor:
+        """
+        :param observation: observations
+        :param deterministic: the most likely actions (among the legal ones) if True, a draw otherwise
+        :param action_masks: the legal actions of each observation, shape (batch, mask_size); None: all legal
+        :return: the actions, as indices
+        """
+        return self.get_distribution(observation, action_masks).get_actions(deterministic=deterministic)
+
+    def _predict_masked(self, observation: PyTorchObs, deterministic: bool, action_masks: np.ndarray) -> th.Tensor:
+        """``_predict`` with masks (``EnvActionsMixin.predict``'s hook)."""
+        return self._predict(observation, deterministic, action_masks)
+
+    def release_distributions(self) -> None:
+        """
+        Drop the distributions evaluated last, which hold the graph of their step: it is then freed, and the policy
+        can be copied (``copy.deepcopy``, pickle) by a callback, as A2C's can during its rollouts.
+        """
+        self.action_dist.distribution = None  # type: ignore[assignment]
+        if self.masked_action_dist is not None:
+            for name in ("distribution", "distributions"):
+                if hasattr(self.masked_action_dist, name):
+                    setattr(self.masked_action_dist, name, None if name == "distribution" else [])
 
     def predict_values(self, obs: PyTorchObs) -> th.Tensor:
         """
@@ -203,18 +296,22 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         self._check_value_network("predict_values")
         return super().predict_values(obs)
 
-    def sample_actions(self, obs: PyTorchObs) -> th.Tensor:
+    def sample_actions(self, obs: PyTorchObs, action_masks: np.ndarray | None = None) -> th.Tensor:
         """
         ``A ~ π(·|obs, θ)``, the behaviour policy of the rollout loop: the actions of ``forward(obs)`` where a subclass
         overrides it (as SB3's A2C acts with them), else a draw from ``get_distribution(obs)``. For Discrete
         actions, where a subclass overrides none of SB3's hooks of that distribution, this is the draw
         ``CategoricalDistribution.sample()`` makes (the same ``multinomial`` call on the soft-max of the logits),
         without building a ``torch.distributions`` object at every env step, which is most of the per-step cost
-        of SB3's ``get_distribution``; otherwise (other action spaces, a subclass that masks actions) SB3's.
+        of SB3's ``get_distribution``; otherwise (other action spaces, a subclass that masks actions) SB3's. With masks
+        that make some action illegal, a draw from sb3-contrib's masked distribution (``get_distribution``).
 
         :param obs: the observations of all envs
+        :param action_masks: their legal actions, shape (n_envs, mask_size); None: all legal
         :return: one action per env
         """
+        if action_masks is not None and self._masks_restrict(action_masks):
+            return self.get_distribution(obs, action_masks).get_actions()
         if self._own_forward:
             # A subclass's forward (A2C's rollouts take its actions; its values and log-probabilities are not needed)
             return self(obs)[0]

@@ -57,6 +57,15 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
     ones. (The steps of such an episode taken before an update were sampled by the policy before it; with one
     env, every update is exactly on-policy.)
 
+    Invalid-action masking (Discrete, MultiDiscrete, MultiBinary actions) works as in sb3-contrib's MaskablePPO: when
+    the env supports it (an ``action_masks()`` method, or sb3-contrib's ``ActionMasker`` wrapper) and
+    ``learn(use_masking=True)`` (the default), π is sb3-contrib's masked distribution in the rollouts and in the
+    update: ln π(A_t|S_t, θ) is over the legal actions of S_t (its mask, stored with the step), an illegal action's
+    logit gets no gradient, and the entropy bonus is over the legal actions. ``predict(obs, action_masks=...)``
+    takes masks as MaskablePPO's does (sb3-contrib's ``MaskableEvalCallback`` and ``evaluate_policy`` pass them).
+    Unlike MaskablePPO, an env without masks trains unmasked. The baseline v̂(S_T) of a truncation's final state
+    does not depend on masks.
+
     :param policy: the policy model to use (``"MlpPolicy"``, ``"CnnPolicy"``, ``"MultiInputPolicy"``)
     :param env: the environment to learn from (if registered in Gymnasium, can be str)
     :param learning_rate: learning rate α^θ of the policy network (a float or an SB3 schedule of the remaining
@@ -193,9 +202,9 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             **self.policy_kwargs,
         )
 
-    def _sample_actions(self, obs: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
-        # A ~ π(·|S, θ); the baseline v̂ is only needed at update time
-        actions = self.policy.sample_actions(obs_as_tensor(obs, self.device)).cpu().numpy()
+    def _sample_actions(self, obs: np.ndarray | dict[str, np.ndarray], action_masks: np.ndarray | None = None) -> np.ndarray:
+        # A ~ π(·|S, θ) over the legal actions; the baseline v̂ is only needed at update time
+        actions = self.policy.sample_actions(obs_as_tensor(obs, self.device), action_masks).cpu().numpy()
         if isinstance(self.action_space, spaces.Box):
             # SB3's Gaussian draws flat actions (n_envs, action_dim); the env and the buffer take the space's shape
             # (as SB3's ActorCriticPolicy.forward reshapes them), e.g. (n_envs, 2, 3) for Box(shape=(2, 3))
@@ -230,6 +239,7 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             targets=returns[trained],
             episode_steps=data.episode_steps[trained],
             n_trained=np.count_nonzero(trained, axis=0),
+            action_masks=None if data.action_masks is None else data.action_masks[trained],
         )
 
     def _distribution_actions(self, actions: np.ndarray) -> np.ndarray:
@@ -243,7 +253,12 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         return actions
 
     def _gradient_step(
-        self, observations: th.Tensor | dict[str, th.Tensor], actions: th.Tensor, returns: th.Tensor, episode_steps: th.Tensor
+        self,
+        observations: th.Tensor | dict[str, th.Tensor],
+        actions: th.Tensor,
+        returns: th.Tensor,
+        episode_steps: th.Tensor,
+        action_masks: th.Tensor | None = None,
     ) -> dict[str, th.Tensor]:
         """
         One gradient step of each network on the mean over the given steps (one step: the book's per-step update).
@@ -252,13 +267,14 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         :param actions: A_t, as the buffer stores them
         :param returns: G_t, shape (B,)
         :param episode_steps: t, the step of each within its episode, shape (B,)
+        :param action_masks: the legal actions of each S_t, shape (B, mask_size), if masking is on
         :return: the losses, and v̂(S_t) before the step (detached; zeros without a baseline)
         """
         if self.use_baseline:
-            values, log_prob, entropy = self.policy.evaluate_actions(observations, actions)
+            values, log_prob, entropy = self.policy.evaluate_actions(observations, actions, action_masks)
             values = values.flatten()
         else:
-            distribution = self.policy.get_distribution(observations)
+            distribution = self.policy.get_distribution(observations, action_masks)
             log_prob, entropy = distribution.log_prob(actions), distribution.entropy()
             values = th.zeros_like(returns)
         assert entropy is not None, "the action distributions REINFORCE supports have an entropy"
@@ -290,7 +306,7 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             optimizer.step()
         # The distribution evaluated here holds this step's graph: dropped, so that the graph is freed and the policy
         # can be copied (copy.deepcopy, pickle) by a callback, as A2C's can during its rollouts
-        self.policy.action_dist.distribution = None  # type: ignore[assignment]
+        self.policy.release_distributions()
         return dict(
             policy_loss=policy_loss.detach(),
             value_loss=value_loss.detach(),
@@ -312,13 +328,17 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         actions = th.as_tensor(batch.actions, device=self.device)
         returns = th.as_tensor(batch.targets, device=self.device)
         episode_steps = th.as_tensor(batch.episode_steps, device=self.device)
+        masks = None if batch.action_masks is None else th.as_tensor(batch.action_masks, device=self.device)
 
         # Per step: the book's loop over each episode's steps t = 0, …, T − 1, in the order they were taken (with
         # several envs, the episodes' steps interleave in time order)
         steps = []
         for chunk in self._update_slices(len(returns)):
             chunk_observations = select(observations, chunk)  # type: ignore[arg-type]
-            steps.append(self._gradient_step(chunk_observations, actions[chunk], returns[chunk], episode_steps[chunk]))  # type: ignore[arg-type]
+            chunk_masks = None if masks is None else masks[chunk]
+            steps.append(
+                self._gradient_step(chunk_observations, actions[chunk], returns[chunk], episode_steps[chunk], chunk_masks)  # type: ignore[arg-type]
+            )
 
         self.rollout_buffer.mark_trained(batch.n_trained)
         self._n_updates += len(steps)
@@ -342,6 +362,7 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         tb_log_name: str = "REINFORCE",
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,
+        use_masking: bool = True,
     ) -> SelfREINFORCE:
         """
         Train for at least ``total_timesteps`` env steps (the last update waits for its episodes to end).
@@ -355,6 +376,8 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         :param reset_num_timesteps: whether to reset ``num_timesteps`` (and the envs); the learning-rate decay
             counts keep going either way
         :param progress_bar: display a progress bar using tqdm and rich
+        :param use_masking: use the env's invalid-action masks if it has them (``action_masks()``, sb3-contrib's
+            ``ActionMasker``), as MaskablePPO does; an env without them trains unmasked
         :return: the trained model
         """
         return super().learn(
@@ -364,7 +387,30 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             tb_log_name=tb_log_name,
             reset_num_timesteps=reset_num_timesteps,
             progress_bar=progress_bar,
+            use_masking=use_masking,
         )
+
+    def predict(
+        self,
+        observation: np.ndarray | dict[str, np.ndarray],
+        state: tuple[np.ndarray, ...] | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = False,
+        action_masks: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
+        """
+        An action of π (the most likely with ``deterministic=True``), as the env takes it, among the legal actions
+        of ``action_masks`` (sb3-contrib's MaskablePPO's argument).
+
+        :param observation: the input observation (one, or a batch)
+        :param state: unused (no recurrent policy)
+        :param episode_start: unused (no recurrent policy)
+        :param deterministic: the most likely action if True, a draw otherwise
+        :param action_masks: the legal actions of each observation, shape (batch, mask_size) or (mask_size,) for one
+            (sb3-contrib's ``get_action_masks(env)``); None: every action is legal
+        :return: the actions, and the unchanged state
+        """
+        return self.policy.predict(observation, state, episode_start, deterministic, action_masks=action_masks)
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         optimizers = ["policy.optimizer"] + (["policy.value_optimizer"] if self.use_baseline else [])

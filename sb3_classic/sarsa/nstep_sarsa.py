@@ -18,6 +18,7 @@ from sb3_classic.common.returns import (
     completed_windows,
     epsilon_greedy_expectation,
     greedy_random_ties,
+    masked_epsilon_greedy_expectation,
     sarsa_targets,
 )
 from sb3_classic.common.schedules import ExponentialDecay
@@ -42,6 +43,18 @@ class RolloutQValues(NamedTuple):
     n_updates: int
     #: ``num_timesteps`` then (before the step taken in those states)
     num_timesteps: int
+
+
+def _uniform_legal(action_masks: np.ndarray) -> np.ndarray:
+    """
+    :param action_masks: the legal actions of each row, shape (batch, n_actions), each row with at least one
+    :return: an action drawn uniformly from each row's legal ones, shape (batch,), int64 (NumPy's global RNG, as
+        the unmasked draw: with every action legal, the same draws)
+    """
+    n_legal = np.count_nonzero(action_masks, axis=1)
+    # The k-th legal action of each row, k uniform in 0, …, |L(s)| − 1
+    k = np.random.randint(0, n_legal, size=len(action_masks))
+    return (np.cumsum(action_masks, axis=1) > k[:, None]).argmax(axis=1)
 
 
 # Env steps per env between two logger dumps with learn()'s default log_interval ("auto")
@@ -78,6 +91,16 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     takes the first so that it stays reproducible. At a time-limit truncation the target bootstraps from the final
     state with the ε-greedy expectation (1 − ε) max_a q̂ + ε mean_a q̂ (eq. 7.8: no action is taken there); with
     ``expected_sarsa=True`` every bootstrap does (n-step Expected SARSA, eq. 7.7).
+
+    Invalid-action masking works as in sb3-contrib's MaskablePPO: when the env supports it (an ``action_masks()``
+    method, or sb3-contrib's ``ActionMasker`` wrapper) and ``learn(use_masking=True)`` (the default), the ε-greedy
+    policy is over the legal actions L(s): argmax_{a ∈ L(s)} q̂(s, a), and with probability ε an action drawn uniformly
+    from L(s). The mask of every S_t is stored with it, so G_{t:t+n}'s bootstrap follows the mask of S_{t+n}, and the
+    ε-greedy expectation is the masked policy's, (1 − ε) max_{a ∈ L} q̂ + ε mean_{a ∈ L} q̂: an illegal action's q̂ is
+    never a target. The final state of a truncation takes the mask its env reports in ``info["action_mask"]`` (a VecEnv
+    resets a finished env before ``action_masks()`` can be read again), and allows every action if it reports none.
+    ``predict(obs, action_masks=...)`` takes masks as MaskablePPO's does. Unlike MaskablePPO, an env without masks
+    trains unmasked.
 
     :param policy: the policy model to use (``"MlpPolicy"``, ``"CnnPolicy"``, ``"MultiInputPolicy"``, or
         ``"LinearPolicy"``: the book's linear q̂ with its own SGD update, ``LinearQPolicy``)
@@ -294,20 +317,27 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         super()._on_episodes_end(n_episodes)
         self._update_exploration_rate()
 
-    def _epsilon_greedy(self, greedy_actions: np.ndarray, first_action: int = 0) -> np.ndarray:
+    def _epsilon_greedy(
+        self, greedy_actions: np.ndarray, first_action: int = 0, action_masks: np.ndarray | None = None
+    ) -> np.ndarray:
         """
         :param greedy_actions: the greedy actions, one per observation
         :param first_action: the value of the first action (0 for indices, the space's ``start`` for env values)
-        :return: ε-greedy actions: with probability ε an action drawn uniformly from all actions (S&B §2.2),
+        :param action_masks: the legal actions of each observation, shape (batch, n_actions); None: all legal
+        :return: ε-greedy actions: with probability ε an action drawn uniformly from all (legal) actions (S&B §2.2),
             for each observation independently
         """
         explore = np.random.random(greedy_actions.shape) < self.exploration_rate
         if not explore.any():
             return greedy_actions
+        if action_masks is not None:
+            return np.where(explore, first_action + _uniform_legal(action_masks), greedy_actions)
         uniform = np.random.randint(first_action, first_action + self.action_space.n, size=greedy_actions.shape)
         return np.where(explore, uniform, greedy_actions)
 
-    def _sample_actions(self, obs: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
+    def _sample_actions(self, obs: np.ndarray | dict[str, np.ndarray], action_masks: np.ndarray | None = None) -> np.ndarray:
+        if action_masks is not None:
+            return self._sample_masked_actions(obs, action_masks)
         if self.policy.own_predict:
             # A subclass's greedy policy (action masking, say), as SB3's DQN's ε-greedy takes its policy's predict
             greedy = self.policy._predict(obs_as_tensor(obs, self.device), deterministic=False)
@@ -318,6 +348,22 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             self._rollout_q_values = RolloutQValues(q_values, self._n_updates, self.num_timesteps)
         return self._epsilon_greedy(greedy_random_ties(q_values))
 
+    def _sample_masked_actions(self, obs: np.ndarray | dict[str, np.ndarray], action_masks: np.ndarray) -> np.ndarray:
+        """
+        ``_sample_actions`` with masks: ε-greedy over the legal actions of each env, greedy in q̂ (a policy's own
+        ``_predict`` is not asked: the env's masks say what is legal).
+
+        :param obs: the current observations of all envs
+        :param action_masks: their legal actions, shape (n_envs, n_actions)
+        :return: one action index per env
+        """
+        q_values = self.policy.q_values(obs)
+        if self.update_mode == "per_step":
+            self._rollout_q_values = RolloutQValues(q_values, self._n_updates, self.num_timesteps)
+        # argmax over the legal actions: the illegal ones at −∞
+        greedy = greedy_random_ties(np.where(action_masks, q_values, -np.inf))
+        return self._epsilon_greedy(greedy, action_masks=action_masks)
+
     def _rollout_complete(self, n_steps: int, n_episodes: int) -> bool:
         return n_steps >= self.train_freq
 
@@ -327,22 +373,32 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         state: tuple[np.ndarray, ...] | None = None,
         episode_start: np.ndarray | None = None,
         deterministic: bool = False,
+        action_masks: np.ndarray | None = None,
     ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
         """
         The greedy action (``deterministic=True``: the first of tied ones), or the ε-greedy one with the current
         ``exploration_rate``, whose greedy action breaks ties at random as the behaviour policy does; as the env takes
         it (an index plus the ``start`` of a ``Discrete(n, start=...)`` space). Greedy in the weight average
-        ``policy.q_net_average`` with ``averaging_tau``, else in q̂.
+        ``policy.q_net_average`` with ``averaging_tau``, else in q̂. With ``action_masks`` (sb3-contrib's MaskablePPO's
+        argument), greedy and ε-greedy over the legal actions.
 
         :param observation: the input observation (one, or a batch)
         :param state: unused (no recurrent policy)
         :param episode_start: unused (no recurrent policy)
         :param deterministic: greedy if True, ε-greedy otherwise
+        :param action_masks: the legal actions of each observation, shape (batch, n_actions) or (n_actions,) for one
+            (sb3-contrib's ``get_action_masks(env)``); None: every action is legal
         :return: the actions, and the unchanged state
         """
         # In the env's action values (the space's start added), as the ε-greedy draw
-        actions, state = self.policy.predict(observation, state, episode_start, deterministic=deterministic)
-        return (actions if deterministic else self._epsilon_greedy(actions, int(self.action_space.start))), state
+        actions, state = self.policy.predict(observation, state, episode_start, deterministic, action_masks=action_masks)
+        if deterministic:
+            return actions, state
+        if action_masks is None:
+            return self._epsilon_greedy(actions, int(self.action_space.start)), state
+        masks = np.asarray(action_masks, dtype=bool).reshape(-1, int(self.action_space.n))
+        explored = self._epsilon_greedy(np.reshape(actions, -1), int(self.action_space.start), masks)
+        return explored.reshape(np.shape(actions)), state
 
     def _training_batch(self) -> TrainingBatch | None:
         """
@@ -394,7 +450,13 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             truncations = buffer.truncated[: buffer.pos]
             final_obs = select(select(buffer.final_observations, slice(0, buffer.pos)), truncations)
             final_values = np.zeros(truncations.shape, dtype=np.float32)
-            final_values[truncations] = epsilon_greedy_expectation(self._bootstrap_q_values(final_obs), self.exploration_rate)
+            final_q = self._bootstrap_q_values(final_obs)
+            if buffer.final_action_masks is None:
+                final_values[truncations] = epsilon_greedy_expectation(final_q, self.exploration_rate)
+            else:
+                # Under the masked ε-greedy policy of the final state (its env's info["action_mask"], else all legal)
+                final_masks = buffer.final_action_masks[: buffer.pos][truncations]
+                final_values[truncations] = masked_epsilon_greedy_expectation(final_q, final_masks, self.exploration_rate)
             bootstrap[truncated] = final_values[stop_rows[truncated], envs[truncated]]
         return bootstrap
 
@@ -417,7 +479,10 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             and self.update_mode == "per_step"  # (the batch mode's values are those of one pass over every stored step)
             and self.policy.q_net_target is None
         ):
-            return self._action_values(last.q_values, envs, self.rollout_buffer.actions[rows, envs])
+            masks = self.rollout_buffer.action_masks
+            return self._action_values(
+                last.q_values, envs, self.rollout_buffer.actions[rows, envs], None if masks is None else masks[rows, envs]
+            )
         return self._stored_values()[rows, envs]
 
     def _stored_values(self) -> np.ndarray:
@@ -429,21 +494,29 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         data = self.rollout_buffer.get()
         n_rows, n_envs = data.rewards.shape
         q_values = self._bootstrap_q_values(select(data.observations, np.ones((n_rows, n_envs), dtype=bool)))
-        return self._action_values(q_values, np.arange(len(q_values)), data.actions.reshape(-1)).reshape(n_rows, n_envs)
+        masks = None if data.action_masks is None else data.action_masks.reshape(n_rows * n_envs, -1)
+        rows = np.arange(len(q_values))
+        return self._action_values(q_values, rows, data.actions.reshape(-1), masks).reshape(n_rows, n_envs)
 
     def _bootstrap_q_values(self, observations: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
         """:return: q̂(S, ·) of a batch of observations from the bootstrap network, shape (B, n_actions), no gradient"""
         with th.no_grad():
             return self.policy.bootstrap_net(obs_as_tensor(observations, self.device)).cpu().numpy()
 
-    def _action_values(self, q_values: np.ndarray, rows: np.ndarray, actions: np.ndarray) -> np.ndarray:
+    def _action_values(
+        self, q_values: np.ndarray, rows: np.ndarray, actions: np.ndarray, action_masks: np.ndarray | None = None
+    ) -> np.ndarray:
         """
         :param q_values: q̂(S, ·) of states, shape (N, n_actions)
         :param rows: the states to bootstrap from, indices into ``q_values``, shape (B,)
         :param actions: the actions taken there, shape (B,)
-        :return: q̂(S, A) of the action taken (SARSA), or Σ_a π(a|S) q̂(S, a) (Expected SARSA, S&B eq. 7.8), float32,
-            shape (B,)
+        :param action_masks: the legal actions there, shape (B, n_actions), if masking is on
+        :return: q̂(S, A) of the action taken (SARSA; a legal one), or Σ_a π(a|S) q̂(S, a) (Expected SARSA, S&B
+            eq. 7.8, under the ε-greedy policy over the legal actions), float32, shape (B,)
         """
+        if self.expected_sarsa and action_masks is not None:
+            expectation = masked_epsilon_greedy_expectation(q_values[rows], action_masks, self.exploration_rate)
+            return expectation.astype(np.float32)
         if self.expected_sarsa:
             return epsilon_greedy_expectation(q_values[rows], self.exploration_rate).astype(np.float32)
         return q_values[rows, actions].astype(np.float32, copy=False)
@@ -544,6 +617,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         tb_log_name: str = "NStepSARSA",
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,
+        use_masking: bool = True,
     ) -> SelfNStepSARSA:
         """
         Train for ``total_timesteps`` env steps (rounded up to whole rollouts).
@@ -560,6 +634,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             learning-rate decay counts keep going either way; a linear ε decay follows this call's progress, as in
             SB3's DQN: from ``exploration_initial_eps`` again if True, from where the steps so far put it if False
         :param progress_bar: display a progress bar using tqdm and rich
+        :param use_masking: use the env's invalid-action masks if it has them (``action_masks()``, sb3-contrib's
+            ``ActionMasker``), as MaskablePPO does; an env without them trains unmasked
         :return: the trained model
         """
         if log_interval == "auto":
@@ -571,4 +647,5 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             tb_log_name=tb_log_name,
             reset_num_timesteps=reset_num_timesteps,
             progress_bar=progress_bar,
+            use_masking=use_masking,
         )

@@ -267,6 +267,19 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         q_values = self.greedy_net(observation)
         return th.as_tensor(greedy_random_ties(q_values.cpu().numpy()), device=q_values.device)
 
+    def _predict_masked(self, observation: PyTorchObs, deterministic: bool, action_masks: np.ndarray) -> th.Tensor:
+        """
+        :param observation: the observations
+        :param deterministic: the first of tied greedy actions; False: one of them at random (as ``_predict``)
+        :param action_masks: the legal actions of each observation, shape (batch, n_actions), boolean (sb3-contrib's
+            masks)
+        :return: the greedy actions argmax_{a legal} q̂(obs, a) of ``greedy_net``
+        """
+        # Illegal actions at −∞: never the argmax while some action is legal
+        q_masked = np.where(action_masks, self.greedy_net(observation).cpu().numpy(), -np.inf)
+        greedy = q_masked.argmax(axis=1) if deterministic else greedy_random_ties(q_masked)
+        return th.as_tensor(greedy, device=self.device)
+
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = super()._get_constructor_parameters()
         data.update(
