@@ -11,6 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 import torch as th
 from torch import nn
+from torch.optim.adam import adam
 
 #: Elementwise activations without parameters: applied to the stacked (K, B, features) activations they act on each
 #: member's features as on its own network's
@@ -188,32 +189,55 @@ def clip_grad_norms_per_member(parameters: Sequence[th.Tensor], max_norm: float)
 class StackedAdam:
     """
     Adam (Kingma & Ba 2015) over stacked parameters (member first, shape (K, ...)) as K independent Adams: each member
-    its own step count, bias corrections and learning rate, and a step moves only the members it is given. The
-    arithmetic is ``torch.optim.Adam``'s (``foreach=False``): m ← m + (1 − β₁)(g − m) (``lerp``), v ← β₂v + (1 − β₂)g²,
-    w ← w − α/(1 − β₁ᵗ) · m / (√v / √(1 − β₂ᵗ) + ε).
+    its own step count (hence bias corrections) and learning rate, and a step moves only the members it is given.
 
-    torch's Adam keeps one step count per tensor and moves every element of it at each step (its moments decay even
-    where the gradient is 0), and no library optimizer takes a mask over slices of a tensor: a member with nothing to
-    train at a step (n-step SARSA's members at episode ends train several transitions one after the other while the
-    others train one or none) would otherwise be moved.
+    torch's ``Adam`` keeps one step count per tensor and moves every element of it at each step (its moments decay even
+    where the gradient is 0), and no library optimizer takes a mask over slices of a tensor, which a population needs:
+    n-step SARSA's members at an episode's end train several transitions one after the other while the others train one
+    or none. Here each member's slice of each stacked parameter is a tensor of its own (a view) with its own step count,
+    and a step passes the slices of the members it moves to torch's functional ``torch.optim.adam.adam``: the
+    arithmetic is ``torch.optim.Adam``'s, fused or not as the members' optimizers are.
 
     :param parameters: the stacked parameters, member first
     :param n_members: K
     :param betas: (β₁, β₂)
     :param eps: ε
+    :param fused: torch's fused kernel (the members' optimizers' ``fused``)
+    :param foreach: torch's multi-tensor path (their ``foreach``)
     """
 
     def __init__(
-        self, parameters: Sequence[th.Tensor], n_members: int, betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8
+        self,
+        parameters: Sequence[th.Tensor],
+        n_members: int,
+        betas: tuple[float, float] = (0.9, 0.999),
+        eps: float = 1e-8,
+        fused: bool | None = None,
+        foreach: bool | None = None,
     ) -> None:
         self.parameters = list(parameters)
         self.n_members = n_members
         self.beta1, self.beta2 = betas
         self.eps = eps
-        #: each member's step count t, shape (K,)
-        self.steps = np.zeros(n_members, dtype=np.int64)
+        self.fused, self.foreach = fused, foreach
         self.exp_avgs = [th.zeros_like(parameter, memory_format=th.contiguous_format) for parameter in self.parameters]
         self.exp_avg_sqs = [th.zeros_like(parameter, memory_format=th.contiguous_format) for parameter in self.parameters]
+        # Member k's slices, one tensor each: parameters, moments, and its step count t (one per slice, as torch's)
+        self._parameter_slices = [parameter.data.unbind(0) for parameter in self.parameters]
+        self._exp_avg_slices = [exp_avg.unbind(0) for exp_avg in self.exp_avgs]
+        self._exp_avg_sq_slices = [exp_avg_sq.unbind(0) for exp_avg_sq in self.exp_avg_sqs]
+        scalar = th.float32
+        self._steps = [[th.zeros((), dtype=scalar, device=parameter.device) for _ in range(n_members)] for parameter in self.parameters]
+
+    @property
+    def steps(self) -> np.ndarray:
+        """Each member's step count t, shape (K,)."""
+        return np.array([int(step) for step in self._steps[0]], dtype=np.int64)
+
+    def set_state(self, member: int, step: int) -> None:
+        """:param member: k; :param step: its step count t (its moments are set in ``exp_avgs``/``exp_avg_sqs``)"""
+        for steps in self._steps:
+            steps[member].fill_(step)
 
     def zero_grad(self) -> None:
         """Drop the gradients (``set_to_none``, as torch's optimizers)."""
@@ -225,36 +249,29 @@ class StackedAdam:
         """
         One Adam step of the given members; the others' weights, moments and step counts are left as they are.
 
-        :param members: the members to step, indices in increasing order, shape (M,)
+        :param members: the members to step, shape (M,)
         :param learning_rates: every member's learning rate α, shape (K,)
         """
-        if len(members) == 0:
-            return
-        self.steps[members] += 1
-        steps = self.steps[members].astype(np.float64)
-        # (in float64, as torch computes them from Python floats, then float32 as the tensor ops take them)
-        bias_correction1 = 1.0 - self.beta1**steps
-        bias_correction2_sqrt = np.sqrt(1.0 - self.beta2**steps)
-        step_sizes = learning_rates[members] / bias_correction1
-        everyone = len(members) == self.n_members
-        index = None if everyone else th.as_tensor(members)
-        for parameter, exp_avg_all, exp_avg_sq_all in zip(self.parameters, self.exp_avgs, self.exp_avg_sqs, strict=True):
-            grad = parameter.grad
-            if grad is None:
-                grad = th.zeros_like(parameter)
-            shape = (-1, *([1] * (parameter.dim() - 1)))
-            if index is None:
-                weight, exp_avg, exp_avg_sq = parameter.data, exp_avg_all, exp_avg_sq_all
-            else:
-                weight, exp_avg, exp_avg_sq = parameter.data[index], exp_avg_all[index], exp_avg_sq_all[index]
-                grad = grad[index]
-            exp_avg.lerp_(grad, 1 - self.beta1)
-            exp_avg_sq.mul_(self.beta2).addcmul_(grad, grad, value=1 - self.beta2)
-            correction2 = th.as_tensor(bias_correction2_sqrt, dtype=weight.dtype).view(shape)
-            denom = (exp_avg_sq.sqrt() / correction2).add_(self.eps)
-            # (addcdiv's order: value · m / d)
-            weight.add_(exp_avg.mul(th.as_tensor(-step_sizes, dtype=weight.dtype).view(shape)).div_(denom))
-            if index is not None:
-                parameter.data.index_copy_(0, index, weight)
-                exp_avg_all.index_copy_(0, index, exp_avg)
-                exp_avg_sq_all.index_copy_(0, index, exp_avg_sq)
+        grads = [
+            (th.zeros_like(parameter) if parameter.grad is None else parameter.grad).unbind(0) for parameter in self.parameters
+        ]
+        # One call per learning rate (one, unless the members' schedules or decays have parted them)
+        for learning_rate in np.unique(learning_rates[members]):
+            group = [int(k) for k in members if learning_rates[k] == learning_rate]
+            adam(
+                [slices[k] for slices in self._parameter_slices for k in group],
+                [slices[k] for slices in grads for k in group],
+                [slices[k] for slices in self._exp_avg_slices for k in group],
+                [slices[k] for slices in self._exp_avg_sq_slices for k in group],
+                [],
+                [steps[k] for steps in self._steps for k in group],
+                foreach=self.foreach,
+                fused=self.fused,
+                amsgrad=False,
+                beta1=self.beta1,
+                beta2=self.beta2,
+                lr=float(learning_rate),
+                weight_decay=0.0,
+                eps=self.eps,
+                maximize=False,
+            )

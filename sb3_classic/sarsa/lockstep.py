@@ -219,7 +219,9 @@ class _LockstepTrainer:
             self.member_parameters.append(parameters)
         self.parameters = list(self.stacked.parameters())
         group = models[0].policy.optimizer.param_groups[0]
-        self.optimizer = StackedAdam(self.parameters, len(models), betas=group["betas"], eps=group["eps"])
+        self.optimizer = StackedAdam(
+            self.parameters, len(models), betas=group["betas"], eps=group["eps"], fused=group["fused"], foreach=group["foreach"]
+        )
         self._load_adam_states()
         self.max_grad_norm = models[0].max_grad_norm
         self.huber = models[0].loss_function == "huber"
@@ -240,7 +242,7 @@ class _LockstepTrainer:
             for index, parameter in enumerate(self.member_parameters[k]):
                 if parameter not in state:
                     continue
-                self.optimizer.steps[k] = int(state[parameter]["step"])
+                self.optimizer.set_state(k, int(state[parameter]["step"]))
                 self.optimizer.exp_avgs[index][k].copy_(self._to_stacked(state[parameter]["exp_avg"]))
                 self.optimizer.exp_avg_sqs[index][k].copy_(self._to_stacked(state[parameter]["exp_avg_sq"]))
 
@@ -326,15 +328,16 @@ class _LockstepTrainer:
     def close(self) -> None:
         """Each member's parameters get storage of their own again, and its optimizer its slice's Adam state."""
         StackedMLP.own_storage(self.networks)
+        steps = self.optimizer.steps
         for k, model in enumerate(self.models):
             state = model.policy.optimizer.state
-            if self.optimizer.steps[k] == 0:
+            if steps[k] == 0:
                 continue
             for index, parameter in enumerate(self.member_parameters[k]):
                 exp_avg = self._to_member(self.optimizer.exp_avgs[index][k], parameter)
                 exp_avg_sq = self._to_member(self.optimizer.exp_avg_sqs[index][k], parameter)
                 state[parameter] = {
-                    "step": th.tensor(float(self.optimizer.steps[k]), dtype=th.float32, device=parameter.device),
+                    "step": th.tensor(float(steps[k]), dtype=th.float32, device=parameter.device),
                     "exp_avg": exp_avg.clone(memory_format=th.contiguous_format),
                     "exp_avg_sq": exp_avg_sq.clone(memory_format=th.contiguous_format),
                 }
