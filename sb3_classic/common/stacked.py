@@ -227,7 +227,9 @@ class StackedAdam:
         self._exp_avg_slices = [exp_avg.unbind(0) for exp_avg in self.exp_avgs]
         self._exp_avg_sq_slices = [exp_avg_sq.unbind(0) for exp_avg_sq in self.exp_avg_sqs]
         scalar = th.float32
-        self._steps = [[th.zeros((), dtype=scalar, device=parameter.device) for _ in range(n_members)] for parameter in self.parameters]
+        self._steps = [
+            [th.zeros((), dtype=scalar, device=parameter.device) for _ in range(n_members)] for parameter in self.parameters
+        ]
 
     @property
     def steps(self) -> np.ndarray:

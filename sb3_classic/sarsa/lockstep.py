@@ -6,6 +6,7 @@ from typing import Any, Literal
 import numpy as np
 import torch as th
 import torch.nn.functional as F
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.torch_layers import FlattenExtractor
 from stable_baselines3.common.type_aliases import MaybeCallback
@@ -92,9 +93,7 @@ class NStepSARSAPopulation:
         check_members(models)
         self.models = list(models)
         #: each member's generator of its behaviour policy's draws
-        self.action_rngs = [
-            np.random.default_rng(np.random.SeedSequence(model.seed, spawn_key=(0,))) for model in self.models
-        ]
+        self.action_rngs = [np.random.default_rng(np.random.SeedSequence(model.seed, spawn_key=(0,))) for model in self.models]
 
     def learn(
         self,
@@ -143,9 +142,7 @@ class NStepSARSAPopulation:
             for model, rng in zip(models, self.action_rngs, strict=True):
                 model._action_rng = rng
             while True:
-                running = [
-                    k for k, model in enumerate(models) if k not in stopped and model.num_timesteps < totals[k]
-                ]
+                running = [k for k, model in enumerate(models) if k not in stopped and model.num_timesteps < totals[k]]
                 if not running:
                     break
                 q_values = trainer.q_values()
@@ -175,20 +172,34 @@ class NStepSARSAPopulation:
             trainer.close()
             for model in models:
                 model._action_rng = None
-        for k, (model, member_callback) in enumerate(zip(models, member_callbacks, strict=True)):
-            if k in errors:
-                continue
-            if log_interval is not None and model.logger.name_to_value:
-                model.dump_logs(iterations[k])
-            member_callback.on_training_end()
-        if errors:
-            first = min(errors)
-            names = ", ".join(f"{k} (seed {models[k].seed})" for k in sorted(errors))
-            raise ValueError(
-                f"NStepSARSAPopulation.learn: member {names} stopped, each as its last update left it (the others trained "
-                f"to the end); member {first}'s error: {errors[first]}"
-            ) from errors[first]
+        _finish_learn(models, member_callbacks, iterations, errors, log_interval)
         return models
+
+
+def _finish_learn(
+    models: list[NStepSARSA],
+    callbacks: list[BaseCallback],
+    iterations: list[int],
+    errors: dict[int, ValueError],
+    log_interval: int | None,
+) -> None:
+    """
+    The end of ``learn`` for each member, as ``NStepSARSA.learn`` ends (the last dump, ``on_training_end``), except for
+    the members stopped by an error, which end as a separate run that raised: then the error, naming them.
+    """
+    for k, (model, member_callback) in enumerate(zip(models, callbacks, strict=True)):
+        if k in errors:
+            continue
+        if log_interval is not None and model.logger.name_to_value:
+            model.dump_logs(iterations[k])
+        member_callback.on_training_end()
+    if errors:
+        first = min(errors)
+        names = ", ".join(f"{k} (seed {models[k].seed})" for k in sorted(errors))
+        raise ValueError(
+            f"NStepSARSAPopulation.learn: member {names} stopped, each as its last update left it (the others trained "
+            f"to the end); member {first}'s error: {errors[first]}"
+        ) from errors[first]
 
 
 class _LockstepTrainer:
@@ -208,9 +219,9 @@ class _LockstepTrainer:
         self.device = device
         self.stacked.share_with(self.networks)
         # Member k's own parameters, in the stacked parameters' order, and how a stacked slice maps onto each
-        self.member_parameters: list[list[nn.Parameter]] = []
+        self.member_parameters: list[list[th.Tensor]] = []
         for network in self.networks:
-            parameters: list[nn.Parameter] = []
+            parameters: list[th.Tensor] = []
             for layer in network:
                 if isinstance(layer, nn.Linear):
                     parameters.append(layer.weight)
@@ -220,7 +231,12 @@ class _LockstepTrainer:
         self.parameters = list(self.stacked.parameters())
         group = models[0].policy.optimizer.param_groups[0]
         self.optimizer = StackedAdam(
-            self.parameters, len(models), betas=group["betas"], eps=group["eps"], fused=group["fused"], foreach=group["foreach"]
+            self.parameters,
+            len(models),
+            betas=group["betas"],
+            eps=group["eps"],
+            fused=group["fused"],
+            foreach=group["foreach"],
         )
         self._load_adam_states()
         self.max_grad_norm = models[0].max_grad_norm
@@ -248,7 +264,7 @@ class _LockstepTrainer:
 
     def q_values(self) -> np.ndarray:
         """:return: q̂(S, ·) of every member's current observations, one stacked forward pass, (K, n_envs, n_actions)"""
-        observations = np.stack([model._last_obs for model in self.models])  # type: ignore[arg-type]
+        observations = np.stack([np.asarray(model._last_obs) for model in self.models])
         with th.no_grad():
             x = th.as_tensor(observations, device=self.device).float()
             return self.stacked(x.reshape(*x.shape[:2], -1)).cpu().numpy()
@@ -274,7 +290,9 @@ class _LockstepTrainer:
         losses: dict[int, list[float]] = {k: [] for k in batches}
         first = next(iter(batches.values()))
         features = np.asarray(first.observations).reshape(len(first.targets), -1).shape[1]
-        observations = {k: np.asarray(batch.observations, dtype=np.float32).reshape(lengths[k], -1) for k, batch in batches.items()}
+        observations = {
+            k: np.asarray(batch.observations, dtype=np.float32).reshape(lengths[k], -1) for k, batch in batches.items()
+        }
         learning_rates = np.array([model.policy.optimizer.param_groups[0]["lr"] for model in self.models], dtype=np.float64)
         for round_index in range(gradient_steps * max(lengths.values())):
             active = [k for k in batches if round_index < gradient_steps * lengths[k]]
@@ -365,6 +383,8 @@ def check_members(models: Sequence[Any]) -> None:
                     f"member {k}'s {name}={value!r} differs from member 0's ({first!r}): a population's members share one "
                     "setting (every argument but seed and env); train members of other settings in a population of their own"
                 )
+    # (raises for layers a stacked network does not hold)
+    StackedMLP.from_sequentials([model.policy.q_net.q_net for model in models])
 
 
 def _check_member(k: int, model: NStepSARSA) -> None:
