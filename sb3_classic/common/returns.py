@@ -392,18 +392,20 @@ def masked_epsilon_greedy_expectation(q_values: np.ndarray, action_masks: np.nda
     return (1.0 - epsilon) * greedy + epsilon * mean
 
 
-def greedy_random_ties(q_values: np.ndarray) -> np.ndarray:
+def greedy_random_ties(q_values: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
     """
     argmax_a q̂(s, a) for each row, ties broken uniformly at random (S&B §2.2: "ties broken arbitrarily", which the
     book's code and figures do at random). The RNG (NumPy's global one, seeded by SB3, as DQN's ε-greedy draws) is
     drawn from only where there is a tie, so a network with distinct outputs gets the plain argmax.
 
     :param q_values: q̂(s, ·), shape (batch, n_actions)
+    :param rng: the generator to break ties with; None: NumPy's global one
     :return: the greedy actions, shape (batch,), int64
     """
     greedy = q_values.argmax(axis=1)
     is_max = q_values == q_values.max(axis=1, keepdims=True)
     if is_max.sum() > len(q_values):
         for row in np.flatnonzero(is_max.sum(axis=1) > 1):
-            greedy[row] = np.random.choice(np.flatnonzero(is_max[row]))
+            ties = np.flatnonzero(is_max[row])
+            greedy[row] = np.random.choice(ties) if rng is None else rng.choice(ties)
     return greedy

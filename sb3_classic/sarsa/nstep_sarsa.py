@@ -253,6 +253,11 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self.exploration_rate = exploration_initial_eps
         # q̂(S, ·) of the rollout loop's last step, the update count and the env steps when it was computed
         self._rollout_q_values = RolloutQValues(np.zeros(0), -1, -1)
+        # q̂(S, ·) of the current observations computed outside the model (a population's stacked forward pass,
+        # sarsa/lockstep.py), taken by the next _sample_actions in place of a forward pass of its own
+        self._next_q_values: np.ndarray | None = None
+        # The generator of the behaviour policy's draws (ε and ties); None: NumPy's global one, seeded by SB3
+        self._action_rng: np.random.Generator | None = None
         if _init_setup_model:
             self._setup_model()  # (which checks the arguments first)
 
@@ -327,12 +332,13 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         :return: ε-greedy actions: with probability ε an action drawn uniformly from all (legal) actions (S&B §2.2),
             for each observation independently
         """
-        explore = np.random.random(greedy_actions.shape) < self.exploration_rate
+        rng, shape, stop = self._action_rng, greedy_actions.shape, first_action + self.action_space.n
+        explore = (np.random.random(shape) if rng is None else rng.random(shape)) < self.exploration_rate
         if not explore.any():
             return greedy_actions
         if action_masks is not None:
             return np.where(explore, first_action + _uniform_legal(action_masks), greedy_actions)
-        uniform = np.random.randint(first_action, first_action + self.action_space.n, size=greedy_actions.shape)
+        uniform = np.random.randint(first_action, stop, size=shape) if rng is None else rng.integers(first_action, stop, shape)
         return np.where(explore, uniform, greedy_actions)
 
     def _sample_actions(self, obs: np.ndarray | dict[str, np.ndarray], action_masks: np.ndarray | None = None) -> np.ndarray:
@@ -342,11 +348,15 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             # A subclass's greedy policy (action masking, say), as SB3's DQN's ε-greedy takes its policy's predict
             greedy = self.policy._predict(obs_as_tensor(obs, self.device), deterministic=False)
             return self._epsilon_greedy(greedy.cpu().numpy().reshape(-1))
-        q_values = self.policy.q_values(obs)
+        q_values = self._next_q_values
+        if q_values is None:
+            q_values = self.policy.q_values(obs)
+        else:
+            self._next_q_values = None
         if self.update_mode == "per_step":
             # Kept for the bootstrap of the next update, if no update comes in between (see _values_at)
             self._rollout_q_values = RolloutQValues(q_values, self._n_updates, self.num_timesteps)
-        return self._epsilon_greedy(greedy_random_ties(q_values))
+        return self._epsilon_greedy(greedy_random_ties(q_values, self._action_rng))
 
     def _sample_masked_actions(self, obs: np.ndarray | dict[str, np.ndarray], action_masks: np.ndarray) -> np.ndarray:
         """
@@ -523,12 +533,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
 
     def train(self) -> None:
         """Update q̂ towards the n-step targets of every transition whose target is known and not trained on yet."""
-        self.policy.set_training_mode(True)
-        self._update_learning_rates([(self.policy.optimizer, self.lr_schedule, "train/learning_rate")])
-        self._update_exploration_rate()
-        self.logger.record("rollout/exploration_rate", self.exploration_rate)
-        # (S_t, A_t, G_{t:t+n}) of every transition whose n steps have been taken (S&B eq. 10.4)
-        batch = self._training_batch()
+        batch = self._start_update()
         if batch is None:
             return
 
@@ -543,10 +548,33 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
                 losses.append(loss)
                 if gradient_step == 0:
                     q_first.append(q_predicted)
+        self._finish_update(batch, len(chunks), q_first, losses)
 
+    def _start_update(self) -> TrainingBatch | None:
+        """
+        The first half of ``train``: the learning rate and ε of this update set and logged.
+
+        :return: (S_t, A_t, G_{t:t+n}) of every transition whose n steps have been taken (S&B eq. 10.4), None if none
+        """
+        self.policy.set_training_mode(True)
+        self._update_learning_rates([(self.policy.optimizer, self.lr_schedule, "train/learning_rate")])
+        self._update_exploration_rate()
+        self.logger.record("rollout/exploration_rate", self.exploration_rate)
+        return self._training_batch()
+
+    def _finish_update(self, batch: TrainingBatch, n_chunks: int, q_first: list[np.ndarray], losses: list[float]) -> None:
+        """
+        The second half of ``train``, after its gradient steps: the transitions marked trained, the copies of q̂ moved,
+        the counts and the log.
+
+        :param batch: the update's transitions (``_start_update``'s)
+        :param n_chunks: the gradient steps of one pass over them (``_update_slices``)
+        :param q_first: q̂(S_t, A_t) before the update's first pass, one array per chunk
+        :param losses: every gradient step's loss
+        """
         self.rollout_buffer.mark_trained(batch.n_trained)
         self._move_copies()
-        self._n_updates += self.gradient_steps * len(chunks)
+        self._n_updates += self.gradient_steps * n_chunks
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         # (the mean of float32 losses in float32, as th.stack(losses).mean() of SB3's DQN)
         self.logger.record("train/loss", losses[0] if len(losses) == 1 else th.tensor(losses).mean().item())
@@ -606,8 +634,9 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         return ', "auto" (every 128 env steps per env)'
 
     def _excluded_save_params(self) -> list[str]:
-        # A cache of the rollout loop's last forward pass: not training state
-        return [*super()._excluded_save_params(), "_rollout_q_values"]
+        # Caches of the rollout loop's forward passes, and a population's generator (it is the population's): not training
+        # state
+        return [*super()._excluded_save_params(), "_rollout_q_values", "_next_q_values", "_action_rng"]
 
     def learn(
         self: SelfNStepSARSA,

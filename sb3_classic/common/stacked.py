@@ -1,0 +1,279 @@
+"""
+K networks of one shape as one module, and the optimizer and gradient clipping that keep them K independent networks.
+
+The K members' weights of each layer are one tensor of shape (K, in, out) and each layer is one batched matrix product
+(``torch.baddbmm``), as CORL's ``VectorizedLinear`` does for ensembles of critics: one call per layer for all members
+in place of K small ones, whose fixed cost dominates at the sizes of the classic tasks.
+"""
+
+from collections.abc import Sequence
+
+import numpy as np
+import torch as th
+from torch import nn
+from torch.optim.adam import adam
+
+#: Elementwise activations without parameters: applied to the stacked (K, B, features) activations they act on each
+#: member's features as on its own network's
+ELEMENTWISE_ACTIVATIONS: tuple[type[nn.Module], ...] = (
+    nn.ReLU,
+    nn.ReLU6,
+    nn.LeakyReLU,
+    nn.ELU,
+    nn.CELU,
+    nn.SELU,
+    nn.GELU,
+    nn.SiLU,
+    nn.Mish,
+    nn.Tanh,
+    nn.Sigmoid,
+    nn.Softplus,
+    nn.Hardtanh,
+    nn.Identity,
+)
+
+
+class StackedLinear(nn.Module):
+    """
+    K linear layers y_k = x_k W_k + b_k as one module: ``weight`` of shape (K, in, out), ``bias`` of shape (K, 1, out),
+    and one ``torch.baddbmm`` for all members (CORL's ``VectorizedLinear``).
+
+    :param weight: the members' weights W_k, shape (K, in_features, out_features)
+    :param bias: their biases b_k, shape (K, 1, out_features), or None for none
+    """
+
+    def __init__(self, weight: th.Tensor, bias: th.Tensor | None) -> None:
+        super().__init__()
+        self.weight = nn.Parameter(weight)
+        self.bias = None if bias is None else nn.Parameter(bias)
+
+    @classmethod
+    def from_linears(cls, linears: Sequence[nn.Linear]) -> "StackedLinear":
+        """
+        :param linears: the members' layers, of one shape (``nn.Linear``'s weight is (out, in): stacked transposed)
+        :return: a stacked layer holding copies of their weights, member k's those of ``linears[k]``
+        """
+        with th.no_grad():
+            weight = th.stack([linear.weight.T for linear in linears])
+            bias = None if linears[0].bias is None else th.stack([linear.bias for linear in linears]).unsqueeze(1)
+        return cls(weight, bias)
+
+    def forward(self, x: th.Tensor) -> th.Tensor:
+        """
+        :param x: the members' inputs, shape (K, B, in_features)
+        :return: x_k W_k + b_k for every member, shape (K, B, out_features)
+        """
+        if self.bias is None:
+            return th.bmm(x, self.weight)
+        return th.baddbmm(self.bias, x, self.weight)
+
+    def share_with(self, linears: Sequence[nn.Linear]) -> None:
+        """
+        Make each member's parameters views into the stacked ones (shared storage, the same ``Parameter`` objects): a
+        forward pass of a member's own network, its ``state_dict`` and its polyak copies read the stacked weights as
+        they are, with no copying.
+
+        :param linears: the members' layers, in member order
+        """
+        for member, linear in enumerate(linears):
+            linear.weight.data = self.weight.data[member].T
+            if linear.bias is not None and self.bias is not None:
+                linear.bias.data = self.bias.data[member, 0]
+
+    @staticmethod
+    def own_storage(linears: Sequence[nn.Linear]) -> None:
+        """
+        Give each member's parameters storage of their own again (a contiguous copy of what they hold now), so that the
+        stacked module can go and a saved member holds its own weights only.
+
+        :param linears: the members' layers
+        """
+        for linear in linears:
+            for parameter in linear.parameters():
+                parameter.data = parameter.data.clone(memory_format=th.contiguous_format)
+
+
+class StackedMLP(nn.Module):
+    """
+    K multilayer perceptrons of one shape (the same layer sizes and activations, weights per member) as one module:
+    ``StackedLinear`` layers and the members' elementwise activations.
+
+    :param layers: the stacked layers and the activations between them, in order
+    """
+
+    def __init__(self, layers: Sequence[nn.Module]) -> None:
+        super().__init__()
+        self.layers = nn.Sequential(*layers)
+
+    @classmethod
+    def from_sequentials(cls, networks: Sequence[nn.Sequential]) -> "StackedMLP":
+        """
+        :param networks: the members' MLPs: ``nn.Linear`` layers and elementwise activations without parameters
+            (``ELEMENTWISE_ACTIVATIONS``), of the same sizes and activations
+        :return: the stacked MLP holding copies of their weights (``share_with`` makes the members' parameters views of
+            them)
+        :raises TypeError: for a layer of another kind
+        :raises ValueError: for members of different shapes or activations
+        """
+        first = list(networks[0])
+        layers: list[nn.Module] = []
+        for index, layer in enumerate(first):
+            column = [list(network)[index] if len(network) == len(first) else None for network in networks]
+            for member, other in enumerate(column):
+                if other is None or type(other) is not type(layer) or repr(other) != repr(layer):
+                    raise ValueError(
+                        f"member {member}'s q̂ differs from member 0's at layer {index} ({other!r} against {layer!r}): the "
+                        "members of a population have one setting (the same net_arch, activation_fn and its kwargs)"
+                    )
+            if isinstance(layer, nn.Linear):
+                layers.append(StackedLinear.from_linears(column))  # type: ignore[arg-type]
+            elif isinstance(layer, ELEMENTWISE_ACTIVATIONS) and next(layer.parameters(), None) is None:
+                layers.append(layer)
+            else:
+                raise TypeError(
+                    f"layer {index} of q̂ is a {type(layer).__name__}: a stacked network holds linear layers and "
+                    f"elementwise activations ({', '.join(kind.__name__ for kind in ELEMENTWISE_ACTIVATIONS)}). Train "
+                    "these members one after the other (model.learn)"
+                )
+        return cls(layers)
+
+    @property
+    def linears(self) -> list[StackedLinear]:
+        """The stacked linear layers, in order."""
+        return [layer for layer in self.layers if isinstance(layer, StackedLinear)]
+
+    def share_with(self, networks: Sequence[nn.Sequential]) -> None:
+        """
+        :param networks: the members' MLPs: their parameters become views into the stacked ones
+            (``StackedLinear.share_with``)
+        """
+        for index, stacked in enumerate(self.linears):
+            stacked.share_with([_linears(network)[index] for network in networks])
+
+    @staticmethod
+    def own_storage(networks: Sequence[nn.Sequential]) -> None:
+        """:param networks: the members' MLPs: their parameters get storage of their own again"""
+        for network in networks:
+            StackedLinear.own_storage(_linears(network))
+
+    def forward(self, x: th.Tensor) -> th.Tensor:
+        """
+        :param x: the members' inputs, shape (K, B, in_features)
+        :return: every member's outputs, shape (K, B, out_features)
+        """
+        return self.layers(x)
+
+
+def _linears(network: nn.Sequential) -> list[nn.Linear]:
+    return [layer for layer in network if isinstance(layer, nn.Linear)]
+
+
+def clip_grad_norms_per_member(parameters: Sequence[th.Tensor], max_norm: float) -> th.Tensor:
+    """
+    ``torch.nn.utils.clip_grad_norm_`` for each member on its own: member k's gradients, all layers together, scaled by
+    min(1, max_norm / (‖g_k‖ + 1e-6)) with ‖g_k‖ the global 2-norm of its slices (not of the whole stack).
+
+    :param parameters: stacked parameters, member first (shape (K, ...)), with gradients
+    :param max_norm: the largest norm a member's gradient keeps
+    :return: each member's norm before clipping, shape (K,)
+    """
+    grads = [parameter.grad for parameter in parameters if parameter.grad is not None]
+    norms = th.stack([th.linalg.vector_norm(grad.flatten(1), 2, dim=1) for grad in grads])
+    total_norms = th.linalg.vector_norm(norms, 2, dim=0)
+    clip_coef = th.clamp(max_norm / (total_norms + 1e-6), max=1.0)
+    for grad in grads:
+        grad.mul_(clip_coef.view(-1, *([1] * (grad.dim() - 1))))
+    return total_norms
+
+
+class StackedAdam:
+    """
+    Adam (Kingma & Ba 2015) over stacked parameters (member first, shape (K, ...)) as K independent Adams: each member
+    its own step count (hence bias corrections) and learning rate, and a step moves only the members it is given.
+
+    torch's ``Adam`` keeps one step count per tensor and moves every element of it at each step (its moments decay even
+    where the gradient is 0), and no library optimizer takes a mask over slices of a tensor, which a population needs:
+    n-step SARSA's members at an episode's end train several transitions one after the other while the others train one
+    or none. Here each member's slice of each stacked parameter is a tensor of its own (a view) with its own step count,
+    and a step passes the slices of the members it moves to torch's functional ``torch.optim.adam.adam``: the
+    arithmetic is ``torch.optim.Adam``'s, fused or not as the members' optimizers are.
+
+    :param parameters: the stacked parameters, member first
+    :param n_members: K
+    :param betas: (β₁, β₂)
+    :param eps: ε
+    :param fused: torch's fused kernel (the members' optimizers' ``fused``)
+    :param foreach: torch's multi-tensor path (their ``foreach``)
+    """
+
+    def __init__(
+        self,
+        parameters: Sequence[th.Tensor],
+        n_members: int,
+        betas: tuple[float, float] = (0.9, 0.999),
+        eps: float = 1e-8,
+        fused: bool | None = None,
+        foreach: bool | None = None,
+    ) -> None:
+        self.parameters = list(parameters)
+        self.n_members = n_members
+        self.beta1, self.beta2 = betas
+        self.eps = eps
+        self.fused, self.foreach = fused, foreach
+        self.exp_avgs = [th.zeros_like(parameter, memory_format=th.contiguous_format) for parameter in self.parameters]
+        self.exp_avg_sqs = [th.zeros_like(parameter, memory_format=th.contiguous_format) for parameter in self.parameters]
+        # Member k's slices, one tensor each: parameters, moments, and its step count t (one per slice, as torch's)
+        self._parameter_slices = [parameter.data.unbind(0) for parameter in self.parameters]
+        self._exp_avg_slices = [exp_avg.unbind(0) for exp_avg in self.exp_avgs]
+        self._exp_avg_sq_slices = [exp_avg_sq.unbind(0) for exp_avg_sq in self.exp_avg_sqs]
+        scalar = th.float32
+        self._steps = [
+            [th.zeros((), dtype=scalar, device=parameter.device) for _ in range(n_members)] for parameter in self.parameters
+        ]
+
+    @property
+    def steps(self) -> np.ndarray:
+        """Each member's step count t, shape (K,)."""
+        return np.array([int(step) for step in self._steps[0]], dtype=np.int64)
+
+    def set_state(self, member: int, step: int) -> None:
+        """:param member: k; :param step: its step count t (its moments are set in ``exp_avgs``/``exp_avg_sqs``)"""
+        for steps in self._steps:
+            steps[member].fill_(step)
+
+    def zero_grad(self) -> None:
+        """Drop the gradients (``set_to_none``, as torch's optimizers)."""
+        for parameter in self.parameters:
+            parameter.grad = None
+
+    @th.no_grad()
+    def step(self, members: np.ndarray, learning_rates: np.ndarray) -> None:
+        """
+        One Adam step of the given members; the others' weights, moments and step counts are left as they are.
+
+        :param members: the members to step, shape (M,)
+        :param learning_rates: every member's learning rate α, shape (K,)
+        """
+        grads = [
+            (th.zeros_like(parameter) if parameter.grad is None else parameter.grad).unbind(0) for parameter in self.parameters
+        ]
+        # One call per learning rate (one, unless the members' schedules or decays have parted them)
+        for learning_rate in np.unique(learning_rates[members]):
+            group = [int(k) for k in members if learning_rates[k] == learning_rate]
+            adam(
+                [slices[k] for slices in self._parameter_slices for k in group],
+                [slices[k] for slices in grads for k in group],
+                [slices[k] for slices in self._exp_avg_slices for k in group],
+                [slices[k] for slices in self._exp_avg_sq_slices for k in group],
+                [],
+                [steps[k] for steps in self._steps for k in group],
+                foreach=self.foreach,
+                fused=self.fused,
+                amsgrad=False,
+                beta1=self.beta1,
+                beta2=self.beta2,
+                lr=float(learning_rate),
+                weight_decay=0.0,
+                eps=self.eps,
+                maximize=False,
+            )

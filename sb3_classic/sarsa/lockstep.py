@@ -1,0 +1,450 @@
+"""K ``NStepSARSA`` models of one setting, each with its own seed and env, trained in lockstep on one stacked q̂."""
+
+from collections.abc import Sequence
+from typing import Any, Literal
+
+import numpy as np
+import torch as th
+import torch.nn.functional as F
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.preprocessing import is_image_space
+from stable_baselines3.common.torch_layers import FlattenExtractor
+from stable_baselines3.common.type_aliases import MaybeCallback
+from stable_baselines3.dqn.policies import QNetwork
+from torch import nn
+
+from sb3_classic.common.buffers import TrainingBatch
+from sb3_classic.common.stacked import StackedAdam, StackedMLP, clip_grad_norms_per_member
+from sb3_classic.common.utils import check_positive_int
+from sb3_classic.sarsa.nstep_sarsa import LOG_EVERY_STEPS, NStepSARSA
+from sb3_classic.sarsa.policies import LinearQPolicy
+
+#: What the members of a population share: every argument but ``seed`` and ``env`` (and the env's shape)
+SHARED_SETTINGS = (
+    "policy_class",
+    "policy_kwargs",
+    "learning_rate",
+    "n_steps",
+    "train_freq",
+    "gradient_steps",
+    "update_mode",
+    "gamma",
+    "expected_sarsa",
+    "td_lambda",
+    "exploration_schedule",
+    "exploration_initial_eps",
+    "exploration_final_eps",
+    "exploration_fraction",
+    "exploration_decay_rate",
+    "target_update_interval",
+    "tau",
+    "averaging_tau",
+    "loss_function",
+    "max_grad_norm",
+    "lr_decay_factor",
+    "lr_decay_every",
+    "lr_decay_milestones",
+    "lr_decay_unit",
+    "handle_timeout_termination",
+    "n_envs",
+    "observation_space",
+    "action_space",
+    "device",
+)
+
+
+class NStepSARSAPopulation:
+    """
+    K ``NStepSARSA`` models of one setting (episodic semi-gradient n-step SARSA, Sutton & Barto §10.2), each built as
+    usual with its own seed and env, trained in lockstep: each member steps its own env with its own ε, schedules,
+    episode boundaries, logger, callback and n-step targets (its own ``_training_batch``), as if it ran alone; what the
+    members share is q̂'s arithmetic. Their q̂s are one ``StackedMLP`` (weights (K, in, out) per layer, one
+    ``torch.baddbmm`` per layer): one stacked forward pass chooses every member's action at each env step, and one
+    stacked gradient step per transition index trains them, with one ``StackedAdam`` (each member its own Adam step
+    count; a member with nothing to train at a step is not moved) and, where ``max_grad_norm`` is set, each member's
+    gradient clipped to its own global norm.
+
+    Member k starts from its own model's weights (those of the separate run with seed k) and Adam state. While
+    ``learn`` runs, each member's q̂ parameters are views into the stacked tensors (the same ``Parameter`` objects, with
+    shared storage): its own code paths (the bootstrap values of its targets, a forward pass where the rollout's cached
+    q̂ is not current, its ``predict`` in a callback) read the current weights with no copying. When ``learn`` returns
+    (or raises), each member's parameters get storage of their own again and its optimizer the Adam state of its slice:
+    the members are K ordinary models that save, load, predict and ``learn`` on their own as any other.
+
+    The behaviour policy's draws (ε and ties) of member k come from a NumPy generator of its own,
+    ``np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(0,)))``, kept by the population across ``learn``
+    calls, not from NumPy's global one that a separate run draws from: member k's draws do not depend on the other
+    members, and a population of the same seeds repeats itself to the bit on the CPU. A separate run with the same
+    seed sees the same transitions only where it draws the same (``model._action_rng`` set to that generator, as the
+    tests do).
+
+    Covered: ``update_mode="per_step"`` with ``train_freq=1`` (any ``gradient_steps``, ``n_steps``, ``loss_function``,
+    ``expected_sarsa``, ``td_lambda``, schedules and decays, several envs per member), ``"MlpPolicy"`` (linear layers
+    and elementwise activations) over flat Box observations, and ``torch.optim.Adam`` without weight decay, AMSGrad or
+    ``maximize``. Anything else is refused with a ``ValueError``/``TypeError`` that names it.
+
+    :param models: the members, ``NStepSARSA`` models of one setting (every argument but ``seed`` and ``env``), each
+        with its own seed (not None) and env
+    :raises ValueError: for members of different settings, without a seed or an env, or of a setting not covered
+    :raises TypeError: for a q̂ or optimizer not covered
+    """
+
+    def __init__(self, models: Sequence[NStepSARSA]) -> None:
+        check_members(models)
+        self.models = list(models)
+        #: each member's generator of its behaviour policy's draws
+        self.action_rngs = [np.random.default_rng(np.random.SeedSequence(model.seed, spawn_key=(0,))) for model in self.models]
+
+    def learn(
+        self,
+        total_timesteps: int,
+        callback: Sequence[MaybeCallback] | None = None,
+        log_interval: int | Literal["auto"] | None = "auto",
+        tb_log_name: str = "NStepSARSA",
+        reset_num_timesteps: bool = True,
+    ) -> list[NStepSARSA]:
+        """
+        Train every member for ``total_timesteps`` env steps (its envs together), as ``NStepSARSA.learn`` would.
+
+        :param total_timesteps: env steps per member
+        :param callback: one callback (or None, or a list of them) per member, in member order; None: none
+        :param log_interval: ``NStepSARSA.learn``'s, for every member's logger
+        :param tb_log_name: the name of each member's run for TensorBoard logging
+        :param reset_num_timesteps: ``NStepSARSA.learn``'s, for every member
+        :return: the members, trained
+        :raises ValueError: if a member's env returned NaN or ±inf (the member's usual error, with the member named):
+            that member stops as its last update left it, the others train to the end first
+        """
+        models = self.models
+        callbacks: list[MaybeCallback] = [None] * len(models) if callback is None else list(callback)
+        if len(callbacks) != len(models):
+            raise ValueError(
+                f"callback: {len(callbacks)} callbacks for {len(models)} members: pass one per member (None for none)"
+            )
+        if log_interval == "auto":
+            log_interval = -(-LOG_EVERY_STEPS // models[0].train_freq)
+        if log_interval is not None:
+            check_positive_int("log_interval", log_interval, hint='Pass the updates between two logger dumps, "auto" or None')
+        setups = [
+            model._setup_learn(total_timesteps, member_callback, reset_num_timesteps, tb_log_name, False)
+            for model, member_callback in zip(models, callbacks, strict=True)
+        ]
+        totals = [total for total, _ in setups]
+        member_callbacks = [member_callback for _, member_callback in setups]
+        for member_callback in member_callbacks:
+            member_callback.on_training_start(locals(), globals())
+
+        errors: dict[int, ValueError] = {}
+        stopped: set[int] = set()
+        iterations = [0] * len(models)
+        trainer = _LockstepTrainer(models)
+        try:
+            for model, rng in zip(models, self.action_rngs, strict=True):
+                model._action_rng = rng
+                # (no action masks: the stacked forward pass chooses over every action)
+                model._setup_masking(False)
+                # A member's optimizer is not stepped while the population trains it (StackedAdam is): a file saved now
+                # would hold a stale Adam state, so saving waits until learn returns
+                model.__dict__["save"] = _refuse_save
+            while True:
+                running = [k for k, model in enumerate(models) if k not in stopped and model.num_timesteps < totals[k]]
+                if not running:
+                    break
+                q_values = trainer.q_values()
+                collected = []
+                for k in running:
+                    model = models[k]
+                    model._next_q_values = q_values[k]
+                    try:
+                        go_on = model.collect_rollouts(model.env, member_callbacks[k], model.rollout_buffer)  # type: ignore[arg-type]
+                    except ValueError as error:
+                        errors[k] = error
+                        stopped.add(k)
+                        continue
+                    finally:
+                        model._next_q_values = None
+                    if not go_on:
+                        stopped.add(k)
+                        continue
+                    iterations[k] += 1
+                    model._update_current_progress_remaining(model.num_timesteps, totals[k])
+                    collected.append(k)
+                trainer.train(collected)
+                for k in collected:
+                    if log_interval is not None and iterations[k] % log_interval == 0:
+                        models[k].dump_logs(iterations[k])
+        finally:
+            trainer.close()
+            for model in models:
+                model._action_rng = None
+                model.__dict__.pop("save", None)
+        _finish_learn(models, member_callbacks, iterations, errors, log_interval)
+        return models
+
+
+def _refuse_save(*args: Any, **kwargs: Any) -> None:
+    """A member's ``save`` while its population trains it."""
+    raise RuntimeError(
+        "A member of an NStepSARSAPopulation cannot be saved while the population's learn() runs (its Adam state is the "
+        "population's until then): save the members after learn() returns, or train the run alone to save checkpoints"
+    )
+
+
+def _finish_learn(
+    models: list[NStepSARSA],
+    callbacks: list[BaseCallback],
+    iterations: list[int],
+    errors: dict[int, ValueError],
+    log_interval: int | None,
+) -> None:
+    """
+    The end of ``learn`` for each member, as ``NStepSARSA.learn`` ends (the last dump, ``on_training_end``), except for
+    the members stopped by an error, which end as a separate run that raised: then the error, naming them.
+    """
+    for k, (model, member_callback) in enumerate(zip(models, callbacks, strict=True)):
+        if k in errors:
+            continue
+        if log_interval is not None and model.logger.name_to_value:
+            model.dump_logs(iterations[k])
+        member_callback.on_training_end()
+    if errors:
+        first = min(errors)
+        names = ", ".join(f"{k} (seed {models[k].seed})" for k in sorted(errors))
+        raise ValueError(
+            f"NStepSARSAPopulation.learn: member {names} stopped, each as its last update left it (the others trained "
+            f"to the end); member {first}'s error: {errors[first]}"
+        ) from errors[first]
+
+
+class _LockstepTrainer:
+    """
+    The stacked q̂ of the members of one ``learn`` call: built from their weights, shared with them while it lives,
+    handed back by ``close``.
+
+    :param models: the members
+    """
+
+    def __init__(self, models: list[NStepSARSA]) -> None:
+        self.models = models
+        self.networks: list[nn.Sequential] = [model.policy.q_net.q_net for model in models]
+        self.stacked = StackedMLP.from_sequentials(self.networks)
+        device = models[0].device
+        self.stacked.to(device)
+        self.device = device
+        self.stacked.share_with(self.networks)
+        # Member k's own parameters, in the stacked parameters' order, and how a stacked slice maps onto each
+        self.member_parameters: list[list[th.Tensor]] = []
+        for network in self.networks:
+            parameters: list[th.Tensor] = []
+            for layer in network:
+                if isinstance(layer, nn.Linear):
+                    parameters.append(layer.weight)
+                    if layer.bias is not None:
+                        parameters.append(layer.bias)
+            self.member_parameters.append(parameters)
+        self.parameters = list(self.stacked.parameters())
+        group = models[0].policy.optimizer.param_groups[0]
+        self.optimizer = StackedAdam(
+            self.parameters,
+            len(models),
+            betas=group["betas"],
+            eps=group["eps"],
+            fused=group["fused"],
+            foreach=group["foreach"],
+        )
+        self._load_adam_states()
+        self.max_grad_norm = models[0].max_grad_norm
+        self.huber = models[0].loss_function == "huber"
+
+    @staticmethod
+    def _to_member(stacked_slice: th.Tensor, parameter: th.Tensor) -> th.Tensor:
+        # (K, in, out)[k] is the transposed (out, in) weight of nn.Linear; (K, 1, out)[k] the (out,) bias
+        return stacked_slice.T if parameter.dim() == 2 else stacked_slice[0]
+
+    @staticmethod
+    def _to_stacked(member_tensor: th.Tensor) -> th.Tensor:
+        return member_tensor.T if member_tensor.dim() == 2 else member_tensor.unsqueeze(0)
+
+    def _load_adam_states(self) -> None:
+        """Start from each member's own Adam state (a member trained before goes on from its moments and step count)."""
+        for k, model in enumerate(self.models):
+            state = model.policy.optimizer.state
+            for index, parameter in enumerate(self.member_parameters[k]):
+                if parameter not in state:
+                    continue
+                self.optimizer.set_state(k, int(state[parameter]["step"]))
+                self.optimizer.exp_avgs[index][k].copy_(self._to_stacked(state[parameter]["exp_avg"]))
+                self.optimizer.exp_avg_sqs[index][k].copy_(self._to_stacked(state[parameter]["exp_avg_sq"]))
+
+    def q_values(self) -> np.ndarray:
+        """:return: q̂(S, ·) of every member's current observations, one stacked forward pass, (K, n_envs, n_actions)"""
+        observations = np.stack([np.asarray(model._last_obs) for model in self.models])
+        with th.no_grad():
+            x = th.as_tensor(observations, device=self.device).float()
+            return self.stacked(x.reshape(*x.shape[:2], -1)).cpu().numpy()
+
+    def train(self, members: list[int]) -> None:
+        """
+        One update of each of the given members (``NStepSARSA.train``): its transitions' gradient steps one after the
+        other in time order, ``gradient_steps`` passes; round r is every member's r-th step, one stacked step.
+
+        :param members: the members that collected their rollout
+        """
+        batches: dict[int, TrainingBatch] = {}
+        for k in members:
+            batch = self.models[k]._start_update()
+            if batch is not None:
+                batches[k] = batch
+        if not batches:
+            return
+        n_members = len(self.models)
+        gradient_steps = self.models[0].gradient_steps
+        lengths = {k: len(batch.targets) for k, batch in batches.items()}
+        q_first: dict[int, list[np.ndarray]] = {k: [] for k in batches}
+        losses: dict[int, list[float]] = {k: [] for k in batches}
+        first = next(iter(batches.values()))
+        features = np.asarray(first.observations).reshape(len(first.targets), -1).shape[1]
+        observations = {
+            k: np.asarray(batch.observations, dtype=np.float32).reshape(lengths[k], -1) for k, batch in batches.items()
+        }
+        learning_rates = np.array([model.policy.optimizer.param_groups[0]["lr"] for model in self.models], dtype=np.float64)
+        for round_index in range(gradient_steps * max(lengths.values())):
+            active = [k for k in batches if round_index < gradient_steps * lengths[k]]
+            x = np.zeros((n_members, 1, features), dtype=np.float32)
+            actions = np.zeros((n_members, 1, 1), dtype=np.int64)
+            targets = np.zeros(n_members, dtype=np.float32)
+            for k in active:
+                transition = round_index % lengths[k]
+                x[k, 0] = observations[k][transition]
+                actions[k, 0, 0] = batches[k].actions[transition]
+                targets[k] = batches[k].targets[transition]
+            q_predicted, member_losses = self._gradient_step(x, actions, targets, np.array(active), learning_rates)
+            for k in active:
+                losses[k].append(member_losses[k])
+                if round_index < lengths[k]:
+                    q_first[k].append(np.array([q_predicted[k]], dtype=np.float32))
+        for k, batch in batches.items():
+            self.models[k]._finish_update(batch, lengths[k], q_first[k], losses[k])
+
+    def _gradient_step(
+        self, x: np.ndarray, actions: np.ndarray, targets: np.ndarray, members: np.ndarray, learning_rates: np.ndarray
+    ) -> tuple[list[float], list[float]]:
+        """
+        One gradient step of the given members, each on its own transition (``NStepSARSA._gradient_step`` with a batch
+        of one).
+
+        :param x: S_t of every member (zeros for the others), shape (K, 1, features)
+        :param actions: A_t, shape (K, 1, 1)
+        :param targets: G_{t:t+n}, shape (K,)
+        :param members: the members to step, shape (M,)
+        :param learning_rates: every member's α, shape (K,)
+        :return: every member's q̂(S_t, A_t) before the step and loss (meaningful for the given members)
+        """
+        q_predicted = self.stacked(th.as_tensor(x, device=self.device)).gather(2, th.as_tensor(actions, device=self.device))
+        q_predicted = q_predicted.view(-1)
+        target = th.as_tensor(targets, device=self.device)
+        # w ← w + α [G_{t:t+n} − q̂(S_t, A_t, w)] ∇q̂(S_t, A_t, w) (S&B eq. 10.5): the gradient of ½(G − q̂)², each
+        # member's own (a sum over members: member k's parameters get its loss's gradient only)
+        if self.huber:
+            member_losses = F.smooth_l1_loss(q_predicted, target, reduction="none")
+        else:
+            member_losses = 0.5 * F.mse_loss(q_predicted, target, reduction="none")
+        index = th.as_tensor(members, device=self.device)
+        self.optimizer.zero_grad()
+        member_losses.index_select(0, index).sum().backward()
+        if self.max_grad_norm is not None and np.isfinite(self.max_grad_norm):
+            clip_grad_norms_per_member(self.parameters, self.max_grad_norm)
+        self.optimizer.step(members, learning_rates)
+        return q_predicted.detach().cpu().tolist(), member_losses.detach().cpu().tolist()
+
+    def close(self) -> None:
+        """Each member's parameters get storage of their own again, and its optimizer its slice's Adam state."""
+        StackedMLP.own_storage(self.networks)
+        steps = self.optimizer.steps
+        for k, model in enumerate(self.models):
+            state = model.policy.optimizer.state
+            if steps[k] == 0:
+                continue
+            for index, parameter in enumerate(self.member_parameters[k]):
+                exp_avg = self._to_member(self.optimizer.exp_avgs[index][k], parameter)
+                exp_avg_sq = self._to_member(self.optimizer.exp_avg_sqs[index][k], parameter)
+                state[parameter] = {
+                    "step": th.tensor(float(steps[k]), dtype=th.float32, device=parameter.device),
+                    "exp_avg": exp_avg.clone(memory_format=th.contiguous_format),
+                    "exp_avg_sq": exp_avg_sq.clone(memory_format=th.contiguous_format),
+                }
+
+
+def check_members(models: Sequence[Any]) -> None:
+    """
+    :param models: the would-be members of a population
+    :raises ValueError: for no members, a model twice, members of different settings, without a seed or an env, or of
+        a setting not covered (the batch mode, ``train_freq`` other than 1, copies of q̂)
+    :raises TypeError: for a member that is not ``NStepSARSA``, or a q̂ or optimizer not covered
+    """
+    if len(models) == 0:
+        raise ValueError("models: a population needs at least one NStepSARSA model")
+    if len({id(model) for model in models}) != len(models):
+        raise ValueError("models: a model appears more than once; build one NStepSARSA model per seed")
+    for k, model in enumerate(models):
+        if not isinstance(model, NStepSARSA):
+            raise TypeError(f"member {k} is a {type(model).__name__}: a population's members are NStepSARSA models")
+        _check_member(k, model)
+        for name in SHARED_SETTINGS:
+            value, first = getattr(model, name), getattr(models[0], name)
+            if value != first:
+                raise ValueError(
+                    f"member {k}'s {name}={value!r} differs from member 0's ({first!r}): a population's members share one "
+                    "setting (every argument but seed and env); train members of other settings in a population of their own"
+                )
+    # (raises for layers a stacked network does not hold)
+    StackedMLP.from_sequentials([model.policy.q_net.q_net for model in models])
+
+
+def _check_member(k: int, model: NStepSARSA) -> None:
+    name = f"member {k} (seed {model.seed})"
+    if model.seed is None:
+        raise ValueError(f"member {k}: seed=None; build each member with a seed of its own (NStepSARSA(..., seed=k))")
+    if model.env is None:
+        raise ValueError(f"{name} has no env to train on: build it with one, or call model.set_env(env) first")
+    if model.update_mode != "per_step" or model.train_freq != 1:
+        raise ValueError(
+            f"{name}: update_mode={model.update_mode!r}, train_freq={model.train_freq}: a population trains the per-step "
+            "mode with train_freq=1 (update_mode='per_step', train_freq=1); train other settings one model after the "
+            "other (model.learn)"
+        )
+    if model.target_update_interval is not None or model.averaging_tau is not None:
+        raise ValueError(
+            f"{name}: target_update_interval={model.target_update_interval!r}, averaging_tau={model.averaging_tau!r}: a "
+            "population's q̂ has no copies (bootstrap network, weight average); leave both None, or train one model after "
+            "the other (model.learn)"
+        )
+    policy = model.policy
+    if isinstance(policy, LinearQPolicy):
+        raise TypeError(
+            f"{name}: policy='LinearPolicy' has its own SGD update, not a stacked network's; use 'MlpPolicy', or train "
+            "one model after the other (model.learn)"
+        )
+    extractor = policy.q_net.features_extractor
+    if type(policy.q_net) is not QNetwork or policy.own_predict or policy.mode_dependent:
+        raise TypeError(
+            f"{name}: q̂ is a {type(policy.q_net).__name__} of a {type(policy).__name__} with its own forward, greedy "
+            "policy or train/eval modes: a population stacks SB3's QNetwork of 'MlpPolicy'; train this one alone"
+        )
+    if type(extractor) is not FlattenExtractor or is_image_space(model.observation_space):
+        raise TypeError(
+            f"{name}: features_extractor={type(extractor).__name__} over {model.observation_space}: a population stacks "
+            "an MLP over flat Box observations ('MlpPolicy'); train CNN and Dict (MultiInputPolicy) models one after the "
+            "other (model.learn)"
+        )
+    optimizer = policy.optimizer
+    group = optimizer.param_groups[0]
+    if type(optimizer) is not th.optim.Adam or group["weight_decay"] or group["amsgrad"] or group["maximize"]:
+        raise TypeError(
+            f"{name}: optimizer {type(optimizer).__name__} with weight_decay={group.get('weight_decay')!r}, "
+            f"amsgrad={group.get('amsgrad')!r}, maximize={group.get('maximize')!r}: a population's optimizer is Adam "
+            "without weight decay, AMSGrad or maximize (StackedAdam); leave optimizer_class and those kwargs out"
+        )
+
+
+__all__ = ["NStepSARSAPopulation", "check_members"]

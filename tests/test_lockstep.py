@@ -1,0 +1,201 @@
+"""A population of NStepSARSA models trained in lockstep on one stacked q̂: each member as its own separate run."""
+
+from pathlib import Path
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import VecEnv
+
+from sb3_classic import NStepSARSA
+from sb3_classic.common.stacked import StackedAdam, StackedMLP, clip_grad_norms_per_member
+from sb3_classic.sarsa import NStepSARSAPopulation
+
+SETTING: dict[str, Any] = dict(
+    policy_kwargs=dict(net_arch=[32, 32]),
+    n_steps=4,
+    learning_rate=5e-4,
+    train_freq=1,
+    gradient_steps=1,
+    update_mode="per_step",
+)
+
+
+def make_member(seed: int, env: VecEnv | None = None, **kwargs: object) -> NStepSARSA:
+    env = make_vec_env("CartPole-v1", n_envs=1, seed=seed) if env is None else env
+    return NStepSARSA("MlpPolicy", env, seed=seed, **{**SETTING, **kwargs})
+
+
+def max_difference(first: NStepSARSA, second: NStepSARSA) -> float:
+    pairs = zip(first.policy.q_net.parameters(), second.policy.q_net.parameters(), strict=True)
+    return max((a - b).abs().max().item() for a, b in pairs)
+
+
+def test_member_trains_as_its_separate_run() -> None:
+    # The separate run draws from the member's generator, so both see the same transitions of the same env. The
+    # stacked layers' batched products may round differently from nn.Linear's in the last bits: close, not equal
+    separate = []
+    for seed in (0, 1):
+        model = make_member(seed)
+        model._action_rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(0,)))
+        separate.append(model.learn(220))
+    members = [make_member(seed) for seed in (0, 1)]
+    before = [p.detach().clone() for p in members[1].policy.q_net.parameters()]
+    NStepSARSAPopulation(members).learn(220)
+    for member, model in zip(members, separate, strict=True):
+        assert member._n_updates == model._n_updates >= 200
+        assert member._completed_episodes == model._completed_episodes
+        assert max_difference(member, model) < 1e-5
+        # Its optimizer holds its slice's Adam state, as the separate run's
+        state, own = member.policy.optimizer.state, model.policy.optimizer.state
+        for p, q in zip(member.policy.q_net.parameters(), model.policy.q_net.parameters(), strict=True):
+            assert int(state[p]["step"]) == int(own[q]["step"])
+            th.testing.assert_close(state[p]["exp_avg"], own[q]["exp_avg"], atol=1e-5, rtol=1e-4)
+    # It learned, and owns its weights again (no view into the stack)
+    after = list(members[1].policy.q_net.parameters())
+    assert all(not th.equal(a, b) for a, b in zip(before, after, strict=True))
+    assert all(p.is_contiguous() and p.untyped_storage().nbytes() == p.numel() * 4 for p in after)
+
+
+def test_a_population_repeats_itself_and_saves_ordinary_models(tmp_path: Path) -> None:
+    runs = [NStepSARSAPopulation([make_member(seed) for seed in (3, 4)]).learn(60) for _ in range(2)]
+    for first, second in zip(*runs, strict=True):
+        assert max_difference(first, second) == 0.0
+    runs[0][1].save(tmp_path / "member")
+    loaded = NStepSARSA.load(tmp_path / "member")
+    assert max_difference(loaded, runs[0][1]) == 0.0
+    obs = np.asarray(runs[0][1].env.reset())  # type: ignore[union-attr]
+    assert np.array_equal(loaded.predict(obs, deterministic=True)[0], runs[0][1].predict(obs, deterministic=True)[0])
+
+
+def test_members_are_independent() -> None:
+    # Member 0 alone and beside members whose episodes end at other times: the same weights
+    alone = NStepSARSAPopulation([make_member(0)]).learn(150)[0]
+    beside = NStepSARSAPopulation([make_member(0), make_member(7), make_member(8)]).learn(150)
+    assert beside[0]._completed_episodes == alone._completed_episodes
+    assert (
+        beside[1]._completed_episodes != alone._completed_episodes
+        or beside[2]._completed_episodes != alone._completed_episodes
+    )
+    assert max_difference(beside[0], alone) < 1e-6
+
+
+class NaNRewardAfter(gym.Wrapper):
+    def __init__(self, env: gym.Env, steps: int) -> None:
+        super().__init__(env)
+        self.steps_left = steps
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.steps_left -= 1
+        return obs, (float("nan") if self.steps_left <= 0 else reward), terminated, truncated, info
+
+
+def test_a_non_finite_reward_stops_its_member_only() -> None:
+    broken = make_vec_env(
+        "CartPole-v1",
+        n_envs=1,
+        seed=1,
+        wrapper_class=NaNRewardAfter,  # type: ignore[arg-type]
+        wrapper_kwargs=dict(steps=30),
+    )
+    members = [make_member(0), make_member(1, broken), make_member(2)]
+    with pytest.raises(ValueError, match=r"member 1 \(seed 1\) stopped.*reward"):
+        NStepSARSAPopulation(members).learn(80)
+    assert members[0].num_timesteps == members[2].num_timesteps == 80
+    assert members[1].num_timesteps == 30
+    # Every member owns its weights again
+    assert all(p.is_contiguous() for member in members for p in member.policy.q_net.parameters())
+
+
+def test_members_with_nothing_to_train_are_not_stepped() -> None:
+    th.manual_seed(0)
+    networks = [th.nn.Sequential(th.nn.Linear(3, 5), th.nn.Tanh(), th.nn.Linear(5, 2)) for _ in range(3)]
+    copies = [th.nn.Sequential(th.nn.Linear(3, 5), th.nn.Tanh(), th.nn.Linear(5, 2)) for _ in range(3)]
+    for network, copy in zip(networks, copies, strict=True):
+        copy.load_state_dict(network.state_dict())
+    stacked = StackedMLP.from_sequentials(networks)
+    optimizer = StackedAdam(list(stacked.parameters()), 3, fused=False, foreach=False)
+    references = [th.optim.Adam(copy.parameters(), lr=1e-2, foreach=False) for copy in copies]
+    x = th.randn(3, 4, 3)
+    learning_rates = np.full(3, 1e-2)
+    for step in range(5):
+        members = np.array([0, 2]) if step % 2 else np.array([0, 1, 2])
+        optimizer.zero_grad()
+        stacked(x)[members].square().sum().backward()
+        optimizer.step(members, learning_rates)
+        for k in members:
+            references[k].zero_grad()
+            copies[k](x[k]).square().sum().backward()
+            references[k].step()
+    assert list(optimizer.steps) == [5, 3, 5]
+    stacked.share_with(networks)
+    for network, copy in zip(networks, copies, strict=True):
+        for p, q in zip(network.parameters(), copy.parameters(), strict=True):
+            th.testing.assert_close(p, q, atol=1e-6, rtol=1e-5)
+    # A step of member 0 alone leaves member 1's weights and Adam state as they were
+    weights = [p.detach()[1].clone() for p in stacked.parameters()]
+    moments = [m[1].clone() for m in optimizer.exp_avgs]
+    optimizer.zero_grad()
+    stacked(x)[0].sum().backward()
+    optimizer.step(np.array([0]), learning_rates)
+    assert list(optimizer.steps) == [6, 3, 5]
+    assert all(th.equal(p.detach()[1], w) for p, w in zip(stacked.parameters(), weights, strict=True))
+    assert all(th.equal(m[1], w) for m, w in zip(optimizer.exp_avgs, moments, strict=True))
+
+
+def test_gradients_are_clipped_per_member() -> None:
+    grads = [th.randn(3, 4, 5) * th.tensor([0.01, 1.0, 100.0]).view(3, 1, 1), th.randn(3, 1, 5)]
+    parameters = [th.zeros_like(grad, requires_grad=True) for grad in grads]
+    for parameter, grad in zip(parameters, grads, strict=True):
+        parameter.grad = grad.clone()
+    clip_grad_norms_per_member(parameters, 1.0)
+    for k in range(3):
+        own = [th.zeros_like(grad[k], requires_grad=True) for grad in grads]
+        for parameter, grad in zip(own, grads, strict=True):
+            parameter.grad = grad[k].clone()
+        th.nn.utils.clip_grad_norm_(own, 1.0)
+        for parameter, expected in zip(parameters, own, strict=True):
+            th.testing.assert_close(parameter.grad[k], expected.grad)  # type: ignore[index]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        (dict(update_mode="batch", train_freq=1), "update_mode='batch'"),
+        (dict(train_freq=2), "train_freq=2"),
+        (dict(target_update_interval=10), "target_update_interval=10"),
+        (dict(policy="LinearPolicy", policy_kwargs=None), "LinearPolicy"),
+        (dict(policy_kwargs=dict(net_arch=[32, 32], layer_norm=True)), "LayerNorm"),
+    ],
+)
+def test_settings_not_covered_are_refused(kwargs: dict, message: str) -> None:
+    policy = kwargs.pop("policy", "MlpPolicy")
+    model = NStepSARSA(policy, make_vec_env("CartPole-v1", n_envs=1, seed=0), seed=0, **{**SETTING, **kwargs})
+    with pytest.raises((ValueError, TypeError), match=message):
+        NStepSARSAPopulation([model])
+
+
+def test_members_of_different_settings_are_refused() -> None:
+    with pytest.raises(ValueError, match=r"member 1's n_steps=5 differs from member 0's \(4\)"):
+        NStepSARSAPopulation([make_member(0), make_member(1, n_steps=5)])
+    with pytest.raises(ValueError, match="seed=None"):
+        NStepSARSAPopulation([NStepSARSA("MlpPolicy", "CartPole-v1", **SETTING)])
+
+
+def test_a_member_is_saved_after_learn_not_during_it(tmp_path: Path) -> None:
+    """While the population trains, a member's Adam state is the population's: a save then is refused, not stale."""
+    from stable_baselines3.common.callbacks import CheckpointCallback
+
+    members = [make_member(seed) for seed in (0, 1)]
+    checkpoints = CheckpointCallback(save_freq=50, save_path=str(tmp_path / "checkpoints"))
+    with pytest.raises(RuntimeError, match="after learn"):
+        NStepSARSAPopulation(members).learn(100, callback=[checkpoints, None])
+    assert not list((tmp_path / "checkpoints").glob("*.zip"))
+    # After learn, an ordinary model again: its save and load keep the weights
+    members[0].save(tmp_path / "member")
+    loaded = NStepSARSA.load(tmp_path / "member")
+    assert max_difference(loaded, members[0]) == 0.0
