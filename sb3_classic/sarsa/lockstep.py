@@ -146,15 +146,22 @@ class NStepSARSAPopulation:
                 # A member's optimizer is not stepped while the population trains it (StackedAdam is): a file saved now
                 # would hold a stale Adam state, so saving waits until learn returns
                 model.__dict__["save"] = _refuse_save
+            # A member's update trains its transitions one stacked step at a time, while the others go on with their
+            # env steps and updates: each member makes the updates of its separate run in the same order, and a
+            # stacked step trains every member that has a transition to train
+            updates: dict[int, _MemberUpdate] = {}
             while True:
-                running = [k for k, model in enumerate(models) if k not in stopped and model.num_timesteps < totals[k]]
-                if not running:
+                ready = [
+                    k
+                    for k, model in enumerate(models)
+                    if k not in stopped and k not in updates and model.num_timesteps < totals[k]
+                ]
+                if not ready and not updates:
                     break
-                q_values = trainer.q_values()
-                collected = []
-                for k in running:
+                q_values = trainer.q_values() if ready else None
+                for k in ready:
                     model = models[k]
-                    model._next_q_values = q_values[k]
+                    model._next_q_values = None if q_values is None else q_values[k]
                     try:
                         go_on = model.collect_rollouts(model.env, member_callbacks[k], model.rollout_buffer)  # type: ignore[arg-type]
                     except ValueError as error:
@@ -168,11 +175,15 @@ class NStepSARSAPopulation:
                         continue
                     iterations[k] += 1
                     model._update_current_progress_remaining(model.num_timesteps, totals[k])
-                    collected.append(k)
-                trainer.train(collected)
-                for k in collected:
-                    if log_interval is not None and iterations[k] % log_interval == 0:
-                        models[k].dump_logs(iterations[k])
+                    batch = model._start_update()
+                    if batch is None:
+                        _dump(model, iterations[k], log_interval)
+                    else:
+                        updates[k] = _MemberUpdate(batch, model.gradient_steps)
+                for k in trainer.step(updates):
+                    update = updates.pop(k)
+                    models[k]._finish_update(update.batch, update.length, update.q_first, update.losses)
+                    _dump(models[k], iterations[k], log_interval)
         finally:
             trainer.close()
             for model in models:
@@ -216,6 +227,32 @@ def _finish_learn(
         ) from errors[first]
 
 
+class _MemberUpdate:
+    """
+    A member's update in progress: its transitions (``NStepSARSA._start_update``'s batch), trained one stacked step at
+    a time, and what ``_finish_update`` logs of them.
+
+    :param batch: the update's transitions
+    :param gradient_steps: passes over them
+    """
+
+    def __init__(self, batch: TrainingBatch, gradient_steps: int) -> None:
+        self.batch = batch
+        self.length = len(batch.targets)
+        self.observations = np.asarray(batch.observations, dtype=np.float32).reshape(self.length, -1)
+        #: the gradient steps of the update, and those made
+        self.rounds, self.round = gradient_steps * self.length, 0
+        #: q̂(S_t, A_t) before the first pass, one array per transition, and every gradient step's loss
+        self.q_first: list[np.ndarray] = []
+        self.losses: list[float] = []
+
+
+def _dump(model: NStepSARSA, iteration: int, log_interval: int | None) -> None:
+    """``NStepSARSA.learn``'s dump after an update (every ``log_interval`` rollouts)."""
+    if log_interval is not None and iteration % log_interval == 0:
+        model.dump_logs(iteration)
+
+
 class _LockstepTrainer:
     """
     The stacked q̂ of the members of one ``learn`` call: built from their weights, shared with them while it lives,
@@ -253,6 +290,8 @@ class _LockstepTrainer:
             foreach=group["foreach"],
         )
         self._load_adam_states()
+        #: the length of a flattened observation
+        self.features = int(np.prod(models[0].observation_space.shape or (1,)))
         self.max_grad_norm = models[0].max_grad_norm
         self.huber = models[0].loss_function == "huber"
 
@@ -283,48 +322,38 @@ class _LockstepTrainer:
             x = th.as_tensor(observations, device=self.device).float()
             return self.stacked(x.reshape(*x.shape[:2], -1)).cpu().numpy()
 
-    def train(self, members: list[int]) -> None:
+    def step(self, updates: dict[int, "_MemberUpdate"]) -> list[int]:
         """
-        One update of each of the given members (``NStepSARSA.train``): its transitions' gradient steps one after the
-        other in time order, ``gradient_steps`` passes; round r is every member's r-th step, one stacked step.
+        One stacked gradient step: every member with an update in progress takes the gradient step of its next
+        transition (``NStepSARSA.train``'s per-step mode: its transitions one after the other in time order,
+        ``gradient_steps`` passes); the others are not stepped.
 
-        :param members: the members that collected their rollout
+        :param updates: the members' updates in progress, by member
+        :return: the members whose update this step finished
         """
-        batches: dict[int, TrainingBatch] = {}
-        for k in members:
-            batch = self.models[k]._start_update()
-            if batch is not None:
-                batches[k] = batch
-        if not batches:
-            return
+        if not updates:
+            return []
         n_members = len(self.models)
-        gradient_steps = self.models[0].gradient_steps
-        lengths = {k: len(batch.targets) for k, batch in batches.items()}
-        q_first: dict[int, list[np.ndarray]] = {k: [] for k in batches}
-        losses: dict[int, list[float]] = {k: [] for k in batches}
-        first = next(iter(batches.values()))
-        features = np.asarray(first.observations).reshape(len(first.targets), -1).shape[1]
-        observations = {
-            k: np.asarray(batch.observations, dtype=np.float32).reshape(lengths[k], -1) for k, batch in batches.items()
-        }
+        x = np.zeros((n_members, 1, self.features), dtype=np.float32)
+        actions = np.zeros((n_members, 1, 1), dtype=np.int64)
+        targets = np.zeros(n_members, dtype=np.float32)
+        for k, update in updates.items():
+            transition = update.round % update.length
+            x[k, 0] = update.observations[transition]
+            actions[k, 0, 0] = update.batch.actions[transition]
+            targets[k] = update.batch.targets[transition]
         learning_rates = np.array([model.policy.optimizer.param_groups[0]["lr"] for model in self.models], dtype=np.float64)
-        for round_index in range(gradient_steps * max(lengths.values())):
-            active = [k for k in batches if round_index < gradient_steps * lengths[k]]
-            x = np.zeros((n_members, 1, features), dtype=np.float32)
-            actions = np.zeros((n_members, 1, 1), dtype=np.int64)
-            targets = np.zeros(n_members, dtype=np.float32)
-            for k in active:
-                transition = round_index % lengths[k]
-                x[k, 0] = observations[k][transition]
-                actions[k, 0, 0] = batches[k].actions[transition]
-                targets[k] = batches[k].targets[transition]
-            q_predicted, member_losses = self._gradient_step(x, actions, targets, np.array(active), learning_rates)
-            for k in active:
-                losses[k].append(member_losses[k])
-                if round_index < lengths[k]:
-                    q_first[k].append(np.array([q_predicted[k]], dtype=np.float32))
-        for k, batch in batches.items():
-            self.models[k]._finish_update(batch, lengths[k], q_first[k], losses[k])
+        active = np.array(list(updates))
+        q_predicted, member_losses = self._gradient_step(x, actions, targets, active, learning_rates)
+        finished = []
+        for k, update in updates.items():
+            update.losses.append(member_losses[k])
+            if update.round < update.length:
+                update.q_first.append(np.array([q_predicted[k]], dtype=np.float32))
+            update.round += 1
+            if update.round == update.rounds:
+                finished.append(k)
+        return finished
 
     def _gradient_step(
         self, x: np.ndarray, actions: np.ndarray, targets: np.ndarray, members: np.ndarray, learning_rates: np.ndarray
