@@ -13,7 +13,14 @@ import numpy as np
 from gymnasium import spaces
 from sb3_contrib.common.maskable.utils import get_action_masks, is_masking_supported
 
-__all__ = ["check_action_masks", "check_some_action_legal", "get_action_masks", "is_masking_supported", "mask_segments"]
+__all__ = [
+    "check_action_masks",
+    "check_some_action_legal",
+    "get_action_masks",
+    "is_masking_supported",
+    "mask_segments",
+    "uniform_legal_actions",
+]
 
 
 def mask_segments(action_space: spaces.Space) -> list[int] | None:
@@ -85,3 +92,15 @@ def check_some_action_legal(masks: np.ndarray, action_space: spaces.Space, episo
             "every state an action is chosen in needs at least one legal action (in each action dimension). "
             "End the episode before such a state, or allow an action there"
         )
+
+
+def uniform_legal_actions(action_masks: np.ndarray) -> np.ndarray:
+    """
+    :param action_masks: the legal actions of each row, shape (batch, n_actions), each row with at least one
+    :return: an action drawn uniformly from each row's legal ones, shape (batch,), int64 (NumPy's global RNG, as
+        the unmasked draw: with every action legal, the same draws)
+    """
+    n_legal = np.count_nonzero(action_masks, axis=1)
+    # The k-th legal action of each row, k uniform in 0, …, |L(s)| − 1
+    k = np.random.randint(0, n_legal, size=len(action_masks))
+    return (np.cumsum(action_masks, axis=1) > k[:, None]).argmax(axis=1)

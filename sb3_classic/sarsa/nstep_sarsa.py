@@ -12,6 +12,7 @@ from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor
 
 from sb3_classic.common.arguments import check_arguments
 from sb3_classic.common.buffers import TrainingBatch, select
+from sb3_classic.common.masking import uniform_legal_actions
 from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
 from sb3_classic.common.returns import (
     CompletedWindows,
@@ -43,18 +44,6 @@ class RolloutQValues(NamedTuple):
     n_updates: int
     #: ``num_timesteps`` then (before the step taken in those states)
     num_timesteps: int
-
-
-def _uniform_legal(action_masks: np.ndarray) -> np.ndarray:
-    """
-    :param action_masks: the legal actions of each row, shape (batch, n_actions), each row with at least one
-    :return: an action drawn uniformly from each row's legal ones, shape (batch,), int64 (NumPy's global RNG, as
-        the unmasked draw: with every action legal, the same draws)
-    """
-    n_legal = np.count_nonzero(action_masks, axis=1)
-    # The k-th legal action of each row, k uniform in 0, …, |L(s)| − 1
-    k = np.random.randint(0, n_legal, size=len(action_masks))
-    return (np.cumsum(action_masks, axis=1) > k[:, None]).argmax(axis=1)
 
 
 # Env steps per env between two logger dumps with learn()'s default log_interval ("auto")
@@ -337,7 +326,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         if not explore.any():
             return greedy_actions
         if action_masks is not None:
-            return np.where(explore, first_action + _uniform_legal(action_masks), greedy_actions)
+            return np.where(explore, first_action + uniform_legal_actions(action_masks), greedy_actions)
         uniform = np.random.randint(first_action, stop, size=shape) if rng is None else rng.integers(first_action, stop, shape)
         return np.where(explore, uniform, greedy_actions)
 
