@@ -15,6 +15,7 @@ versions skips the runs written, so an interrupted command resumes.
 
 import argparse
 import hashlib
+import inspect
 import json
 import shlex
 import sys
@@ -36,7 +37,6 @@ import torch as th
 from sb3_contrib import MaskablePPO
 from sb3_contrib.common.envs import InvalidActionEnvDiscrete
 from sb3_contrib.common.maskable.evaluation import evaluate_policy
-from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 
 import sb3_classic
@@ -55,7 +55,11 @@ RUNS = [
     ("maskable_ppo", "masked"),
 ]
 ALGO_NAMES = {"reinforce": "REINFORCE", "nstep_sarsa": "NStepSARSA", "maskable_ppo": "MaskablePPO"}
-ALGO_CLASSES: dict[str, type[BaseAlgorithm]] = {"reinforce": REINFORCE, "nstep_sarsa": NStepSARSA, "maskable_ppo": MaskablePPO}
+ALGO_CLASSES: dict[str, type[REINFORCE] | type[NStepSARSA] | type[MaskablePPO]] = {
+    "reinforce": REINFORCE,
+    "nstep_sarsa": NStepSARSA,
+    "maskable_ppo": MaskablePPO,
+}
 EVAL_SEED_OFFSET = 10_000  # the evaluation env's seed is the run's plus this
 
 
@@ -143,7 +147,7 @@ class _Evaluations(BaseCallback):
             use_masking=self.use_masking,
         )
         self.timesteps.append(int(self.model.num_timesteps))
-        self.mean_returns.append(float(mean_return))
+        self.mean_returns.append(float(np.mean(mean_return)))
 
     def _on_step(self) -> bool:
         if self.model.num_timesteps % self.settings.eval_freq == 0:
@@ -164,10 +168,7 @@ def train_run(algo: str, variant: str, seed: int, settings: Settings) -> dict[st
     evaluations.init_callback(model)
     evaluations.evaluate()  # before training
     start = time.perf_counter()
-    if algo == "maskable_ppo":
-        model.learn(settings.budget, callback=evaluations)
-    else:
-        model.learn(settings.budget, callback=evaluations, use_masking=use_masking)  # type: ignore[call-arg]
+    model.learn(settings.budget, callback=evaluations, use_masking=use_masking)
     seconds = time.perf_counter() - start
     if evaluations.timesteps[-1] != model.num_timesteps:
         evaluations.evaluate()  # at the end of training
@@ -303,6 +304,11 @@ def plot(summaries: dict[tuple[str, str], Summary], settings: Settings, path: Pa
     plt.close(figure)
 
 
+def default(algo: str, name: str) -> Any:
+    """:return: the default of the constructor argument ``name`` of ``algo``"""
+    return inspect.signature(ALGO_CLASSES[algo]).parameters[name].default
+
+
 def report(summaries: dict[tuple[str, str], Summary], settings: Settings, command: str, figure_name: str) -> str:
     n_seeds = next(iter(summaries.values())).returns.shape[0]
     threshold = f"{settings.threshold:g}"
@@ -316,6 +322,14 @@ def report(summaries: dict[tuple[str, str], Summary], settings: Settings, comman
         f"| Steps to {threshold} per seed: median (range), seeds | Time per run (s) |"
     )
     random_masked = settings.ep_length / (settings.dim - settings.n_invalid_actions)
+    versions = (
+        f"sb3_classic {sb3_classic.__version__}, sb3-contrib {sb3_contrib.__version__}, "
+        f"Stable-Baselines3 {stable_baselines3.__version__}"
+    )
+    env = (
+        f"InvalidActionEnvDiscrete(dim={settings.dim}, ep_length={settings.ep_length}, "
+        f"n_invalid_actions={settings.n_invalid_actions})"
+    )
     return f"""# Invalid-action masking
 
 Produced by:
@@ -324,18 +338,16 @@ Produced by:
 {command}
 ```
 
-sb3_classic {sb3_classic.__version__}, sb3-contrib {sb3_contrib.__version__},
-Stable-Baselines3 {stable_baselines3.__version__}, torch {th.__version__} (1 thread, CPU).
+{versions}, torch {th.__version__} (1 thread, CPU).
 
 ## The task
 
-sb3-contrib's `InvalidActionEnvDiscrete(dim={settings.dim}, ep_length={settings.ep_length},
-n_invalid_actions={settings.n_invalid_actions})`: the observation is a state drawn uniformly from {settings.dim}, the
-reward is 1 when the action equals it and 0 otherwise, for {settings.ep_length} steps (maximum return
-{settings.max_return:g}); in each state {settings.n_invalid_actions} of the other actions are illegal, drawn at random,
-and `action_masks()` gives them. The env does not stop an illegal action, it rewards it 0: an unmasked agent's
-uniform choice is right once in {settings.dim} steps (return {settings.ep_length / settings.dim:g}), a masked agent's
-once in {settings.dim - settings.n_invalid_actions} (return {random_masked:g}).
+sb3-contrib's `{env}`: the observation is a state drawn uniformly from {settings.dim}, the reward is 1 when the action
+equals it and 0 otherwise, for {settings.ep_length} steps (maximum return {settings.max_return:g}). In each state
+{settings.n_invalid_actions} of the other actions are illegal, drawn at random, and `action_masks()` gives them. The env
+does not stop an illegal action, it rewards it 0: a uniform choice among all actions is right once in {settings.dim}
+steps (return {settings.ep_length / settings.dim:g}), among the legal ones once in
+{settings.dim - settings.n_invalid_actions} (return {random_masked:g}).
 
 ## Settings
 
@@ -344,7 +356,11 @@ once in {settings.dim - settings.n_invalid_actions} (return {random_masked:g}).
   `MaskablePPO`'s), `"MlpPolicy"`, except γ = {settings.gamma:g} for all three. The package's YAMLs have no entry for
   this env, and its defaults are the settings a user gets without one. The γ is sb3-contrib's example's for this env:
   the action does not change the next state, so the return after the current reward is the same for every action, and
-  a long horizon only adds a large term that no action changes to q̂ and v̂. Nothing was tuned.
+  a long horizon only adds to q̂ and v̂ a large term that no action changes. Nothing was tuned.
+- **When each updates**, with these defaults: REINFORCE after every episode ({settings.ep_length} steps), NStepSARSA
+  every {default("nstep_sarsa", "train_freq")} steps (`train_freq`), MaskablePPO after each rollout of
+  {default("maskable_ppo", "n_steps"):,} steps (`n_steps`): MaskablePPO's first
+  evaluations are of its initial policy, which is how masked REINFORCE and NStepSARSA reach its final return first.
 - **Masked** runs learn with `learn(use_masking=True)` (the default; `MaskablePPO` always masks) and are evaluated with
   masks; **unmasked** runs learn with `learn(use_masking=False)` and are evaluated without.
 - **Evaluation**: sb3-contrib's `evaluate_policy`, deterministic, {settings.n_eval_episodes} episodes on an env of the

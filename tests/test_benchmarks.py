@@ -603,11 +603,11 @@ def test_masking_benchmark_writes_each_run_as_it_finishes_and_resumes(tmp_path: 
     # Other settings train again: one seed at another evaluation frequency
     trained: list[tuple[str, str, int]] = []
 
-    def record(algo: str, variant: str, seed: int, settings: masking.Settings) -> dict[str, Any]:
+    def record_training(algo: str, variant: str, seed: int, settings: masking.Settings) -> dict[str, Any]:
         trained.append((algo, variant, seed))
         return {"timesteps": [0, 200], "mean_return": [0.0, 1.0], "seconds": 0.0}
 
-    monkeypatch.setattr(masking, "train_run", record)
+    monkeypatch.setattr(masking, "train_run", record_training)
     masking.main(
         ["--seeds", "1", "--budget", "200", "--eval-freq", "200", "--eval-episodes", "1", "--results-dir", str(tmp_path)]
     )
