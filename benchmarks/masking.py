@@ -375,7 +375,7 @@ steps (return {settings.ep_length / settings.dim:g}), among the legal ones once 
 
 - **Final mean return**: each seed's last evaluation, mean over seeds and its 95% bootstrap interval
   (`scipy.stats.bootstrap`, BCa, 10,000 resamples).
-- **Env steps to {threshold}** ({threshold} is 90% of the maximum return): the first evaluation where the mean over
+- **Steps to {threshold}**, in env steps ({threshold} is 90% of the maximum return): the first evaluation where the mean over
   seeds is at {threshold} or above; per seed, the first evaluation of the seed there, over the seeds that got there.
 - **Time per run**: wall-clock of `learn()`, evaluations included, mean over seeds.
 
