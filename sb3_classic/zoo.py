@@ -17,24 +17,36 @@ What ``register()`` changes in rl-zoo3, and nothing else:
   ``one_thread_unless_chosen``;
 - ``ExperimentManager._preprocess_schedules`` also reads ``value_learning_rate`` (REINFORCE's second learning rate)
   as the zoo reads ``learning_rate``: ``lin_0.01`` for a linear schedule;
+- ``ExperimentManager.create_callbacks``, for these two algorithms, builds sb3-contrib's ``MaskableEvalCallback``
+  instead of SB3's ``EvalCallback`` when the evaluation env has action masks (``--eval-freq`` evaluates with them);
+- ``rl_zoo3.create_test_env`` (the name ``enjoy`` imports) remembers an env it makes that has action masks, and a model
+  of these two algorithms loaded after it predicts with ``action_masks=get_action_masks(env)`` of that env, unless
+  given masks (``enjoy`` chooses legal actions): see ``_patch_enjoy``;
 - the names a YAML's ``policy_kwargs`` string may use (the zoo evaluates it in ``rl_zoo3.exp_manager``'s namespace,
   which has ``th`` and ``nn``), and a ``-params`` value (evaluated in ``rl_zoo3.utils``'s), gain ``TileCoding``, the
   book's features (``features_extractor_class=TileCoding``).
 """
 
+import contextlib
 import functools
 import importlib
 import inspect
 import os
-from collections.abc import Callable
+import weakref
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 import torch as th
+from sb3_contrib.common.maskable.callbacks import MaskableEvalCallback
+from stable_baselines3.common.callbacks import EvalCallback
 from stable_baselines3.common.utils import get_device
+from stable_baselines3.common.vec_env import VecEnv
 from torch import nn
 
+from sb3_classic.common.masking import get_action_masks, is_masking_supported
 from sb3_classic.common.tile_coding import TileCoding
 from sb3_classic.common.torch_layers import WEIGHT_INITS
 from sb3_classic.reinforce import REINFORCE
@@ -270,13 +282,14 @@ def _dict_attribute(module: ModuleType, name: str, version: str) -> dict[str, An
     return table
 
 
-def _zoo_targets() -> tuple[dict[str, Any], dict[str, Any], dict[str, Any], type, list[dict[str, Any]]]:
+def _zoo_targets() -> tuple[dict[str, Any], dict[str, Any], dict[str, Any], type, list[ModuleType]]:
     """
     Import what ``register()`` patches, checking that it is there and has the expected shape.
 
-    :return: ``ALGOS``, ``HYPERPARAMS_SAMPLER``, ``HYPERPARAMS_CONVERTER``, ``ExperimentManager``, and the namespaces
-        the zoo evaluates a YAML's ``policy_kwargs`` string in (``rl_zoo3.exp_manager``'s) and a ``-params`` value in
-        (``rl_zoo3.utils``'s ``StoreDict``)
+    :return: ``ALGOS``, ``HYPERPARAMS_SAMPLER``, ``HYPERPARAMS_CONVERTER``, ``ExperimentManager``, and the modules
+        ``rl_zoo3.exp_manager`` (where the zoo evaluates a YAML's ``policy_kwargs`` string, and builds its
+        ``EvalCallback``), ``rl_zoo3.utils`` (where it evaluates a ``-params`` value, in ``StoreDict``) and ``rl_zoo3``
+        (whose ``create_test_env`` ``enjoy`` imports)
     """
     try:
         import rl_zoo3
@@ -301,7 +314,11 @@ def _zoo_targets() -> tuple[dict[str, Any], dict[str, Any], dict[str, Any], type
         raise _incompatible(version, "ExperimentManager.__init__ has no 'algo' and 'config' arguments")
     if not isinstance(inspect.getattr_static(manager, "_preprocess_schedules", None), staticmethod):
         raise _incompatible(version, "ExperimentManager._preprocess_schedules is not a static method")
-    return algos, samplers, converters, manager, [vars(exp_manager), vars(utils)]
+    if not callable(getattr(manager, "create_callbacks", None)) or getattr(exp_manager, "EvalCallback", None) is None:
+        raise _incompatible(version, "ExperimentManager.create_callbacks or rl_zoo3.exp_manager.EvalCallback is missing")
+    if not callable(getattr(rl_zoo3, "create_test_env", None)):
+        raise _incompatible(version, "rl_zoo3.create_test_env is missing")
+    return algos, samplers, converters, manager, [exp_manager, utils, rl_zoo3]
 
 
 #: PyTorch's number of intra-op threads when this module was imported: another one later was the user's choice
@@ -386,6 +403,126 @@ def _patch_value_learning_rate(manager: type) -> None:
     manager._preprocess_schedules = staticmethod(_preprocess_schedules)  # type: ignore[attr-defined]
 
 
+def maskable_eval_callback(eval_env: VecEnv, *args: Any, **kwargs: Any) -> EvalCallback:
+    """
+    SB3's ``EvalCallback`` for an env without action masks, sb3-contrib's ``MaskableEvalCallback`` (which evaluates
+    with ``action_masks=get_action_masks(eval_env)``) for one that has them.
+
+    :param eval_env: the evaluation env
+    :param args: ``EvalCallback``'s other arguments
+    :param kwargs: ``EvalCallback``'s other arguments
+    :return: the callback
+    """
+    if is_masking_supported(eval_env):
+        return MaskableEvalCallback(eval_env, *args, **kwargs)
+    return EvalCallback(eval_env, *args, **kwargs)
+
+
+@contextlib.contextmanager
+def _eval_callback_named(module: ModuleType, factory: Callable[..., EvalCallback]) -> Iterator[None]:
+    """Make ``module``'s name ``EvalCallback`` build ``factory``'s callback while the block runs."""
+    namespace = vars(module)
+    original = namespace["EvalCallback"]
+    namespace["EvalCallback"] = factory
+    try:
+        yield
+    finally:
+        namespace["EvalCallback"] = original
+
+
+def _patch_eval_callback(manager: type, exp_manager: ModuleType) -> None:
+    """
+    Make ``ExperimentManager.create_callbacks`` build, for these algorithms, the evaluation callback of
+    ``maskable_eval_callback`` instead of SB3's ``EvalCallback`` (the zoo's ``--eval-freq``): the same arguments, and
+    evaluations with the masks of an env that has them. The zoo's other algorithms keep its ``EvalCallback``.
+    """
+    original = manager.create_callbacks  # type: ignore[attr-defined]
+    if getattr(original, _PATCHED, False):
+        return
+
+    @functools.wraps(original)
+    def create_callbacks(self: Any) -> None:
+        if self.algo not in ALGORITHMS:
+            return original(self)
+        with _eval_callback_named(exp_manager, maskable_eval_callback):
+            return original(self)
+
+    setattr(create_callbacks, _PATCHED, True)
+    manager.create_callbacks = create_callbacks  # type: ignore[attr-defined]
+
+
+# The env with action masks that rl_zoo3.create_test_env made last (enjoy's), while it is alive
+_test_env: "weakref.ref[VecEnv] | None" = None
+
+
+def _predict_with_masks_of(model: Any, env: VecEnv) -> None:
+    """
+    Make ``model.predict`` pass ``action_masks=get_action_masks(env)`` when it is given no masks and the
+    observations are ``env``'s (one per env).
+    """
+    original_predict = model.predict
+
+    @functools.wraps(original_predict)
+    def predict(
+        observation: np.ndarray | dict[str, np.ndarray],
+        state: tuple[np.ndarray, ...] | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = False,
+        action_masks: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
+        first = next(iter(observation.values())) if isinstance(observation, dict) else observation
+        if action_masks is None and len(np.asarray(first)) == env.num_envs:
+            action_masks = get_action_masks(env)
+        return original_predict(observation, state, episode_start, deterministic, action_masks=action_masks)
+
+    model.predict = predict
+
+
+def _patch_enjoy(zoo_package: ModuleType) -> None:
+    """
+    rl-zoo3's ``enjoy`` makes its env with ``rl_zoo3.create_test_env``, loads the model with ``ALGOS[algo].load`` and
+    calls ``model.predict(obs, ...)`` without masks. Wrap that ``create_test_env`` (only ``enjoy`` imports it from the
+    package; ``record_video`` and ``push_to_hub`` take ``rl_zoo3.utils``'s) so that it remembers an env it makes with
+    action masks, and these algorithms' ``load`` so that a model loaded while that env is alive, with its action space,
+    predicts with its masks (``_predict_with_masks_of``). Nothing changes for an env without masks, nor for a model
+    loaded before such an env was made, nor for the zoo's other algorithms.
+    """
+    original_create = vars(zoo_package)["create_test_env"]
+    if getattr(original_create, _PATCHED, False):
+        return
+
+    @functools.wraps(original_create)
+    def create_test_env(*args: Any, **kwargs: Any) -> VecEnv:
+        global _test_env
+        env = original_create(*args, **kwargs)
+        _test_env = weakref.ref(env) if is_masking_supported(env) else None
+        return env
+
+    setattr(create_test_env, _PATCHED, True)
+    vars(zoo_package)["create_test_env"] = create_test_env
+
+    for algo_class in ALGORITHMS.values():
+        load = inspect.getattr_static(algo_class, "load")
+        if not getattr(load.__func__, _PATCHED, False):
+            algo_class.load = _loading_with_masks(load.__func__)  # type: ignore[assignment]
+
+
+def _loading_with_masks(original_load: Callable[..., Any]) -> classmethod:
+    """:return: ``original_load`` (a ``load`` classmethod's function) whose model predicts with the masks of the
+    env ``rl_zoo3.create_test_env`` made last, while it is alive and has the model's action space"""
+
+    @functools.wraps(original_load)
+    def load(cls: type, *args: Any, **kwargs: Any) -> Any:
+        model = original_load(cls, *args, **kwargs)
+        env = _test_env() if _test_env is not None else None
+        if env is not None and model.action_space == env.action_space:
+            _predict_with_masks_of(model, env)
+        return model
+
+    setattr(load, _PATCHED, True)
+    return classmethod(load)
+
+
 def register() -> None:
     """
     Register ``reinforce`` and ``nstep_sarsa`` with rl-zoo3: algorithms, Optuna samplers and converters, default
@@ -403,11 +540,11 @@ def register() -> None:
         return
     _registering = True
     try:
-        algos, samplers, converters, manager, yaml_namespaces = _zoo_targets()
+        algos, samplers, converters, manager, (exp_manager, utils, zoo_package) = _zoo_targets()
     finally:
         _registering = False
     # A name the zoo itself defines there is left alone
-    for namespace in yaml_namespaces:
+    for namespace in (vars(exp_manager), vars(utils)):
         for name, value in YAML_NAMES.items():
             namespace.setdefault(name, value)
     algos.update(ALGORITHMS)
@@ -415,3 +552,5 @@ def register() -> None:
     converters.update(CONVERTERS)
     _patch_experiment_manager(manager)
     _patch_value_learning_rate(manager)
+    _patch_eval_callback(manager, exp_manager)
+    _patch_enjoy(zoo_package)

@@ -18,7 +18,7 @@ import pandas as pd
 import pytest
 from rich.console import Console
 
-from benchmarks import hot_paths, per_step_speed, textbook
+from benchmarks import hot_paths, masking, per_step_speed, textbook
 from benchmarks.common import REPO_ROOT, parse_overrides
 from benchmarks.report import (
     Results,
@@ -568,3 +568,72 @@ def test_run_names_are_shown_as_they_are(
     assert failed == specs[1:]
     assert "done: study a [reading] seed 0" in output
     assert "failed: study a [reading] seed 1: boom" in output
+
+
+def test_masking_benchmark_writes_each_run_as_it_finishes_and_resumes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    arguments = ["--seeds", "2", "--budget", "200", "--eval-freq", "100", "--eval-episodes", "1"]
+    arguments += ["--results-dir", str(tmp_path)]
+    assert masking.main(arguments) == 0
+    records = [json.loads(path.read_text()) for path in sorted((tmp_path / "masking").glob("*.json"))]
+    assert sorted((record["algo"], record["variant"], record["seed"]) for record in records) == sorted(
+        (algo, variant, seed) for algo, variant in masking.RUNS for seed in (0, 1)
+    )
+    for record in records:
+        # Before training, every 100 env steps, and at the end (MaskablePPO's first rollout is 2048 steps)
+        assert record["timesteps"][:3] == [0, 100, 200]
+        assert len(record["mean_return"]) == len(record["timesteps"])
+        assert all(0.0 <= value <= 100.0 for value in record["mean_return"])
+    assert not list((tmp_path / "masking").glob("*.partial"))
+    markdown = (tmp_path / "masking.md").read_text()
+    assert "python -m benchmarks.masking --seeds 2 --budget 200" in markdown
+    rows = [line for line in markdown.splitlines() if line.startswith("| ") and not line.startswith("| Algorithm")]
+    labels = ["REINFORCE, masked", "REINFORCE, unmasked", "NStepSARSA, masked", "NStepSARSA, unmasked", "MaskablePPO"]
+    assert [row.split(" | ")[0].removeprefix("| ") for row in rows] == labels
+    assert markdown.count(": met.") + markdown.count(": **not met**.") == 3
+    assert (tmp_path / "masking.png").stat().st_size > 0
+
+    # A rerun trains nothing and writes the same page
+    def fail(*args: object) -> None:
+        raise AssertionError("a cached run was trained again")
+
+    monkeypatch.setattr(masking, "train_run", fail)
+    assert masking.main(arguments) == 0
+    assert (tmp_path / "masking.md").read_text() == markdown
+
+    # Other settings train again: one seed at another evaluation frequency
+    trained: list[tuple[str, str, int]] = []
+
+    def record_training(algo: str, variant: str, seed: int, settings: masking.Settings) -> dict[str, Any]:
+        trained.append((algo, variant, seed))
+        return {"timesteps": [0, 200], "mean_return": [0.0, 1.0], "seconds": 0.0}
+
+    monkeypatch.setattr(masking, "train_run", record_training)
+    masking.main(
+        ["--seeds", "1", "--budget", "200", "--eval-freq", "200", "--eval-episodes", "1", "--results-dir", str(tmp_path)]
+    )
+    assert trained == [(algo, variant, 0) for algo, variant in masking.RUNS]
+
+
+def masking_summary(algo: str, variant: str, curve: list[float]) -> masking.Summary:
+    return masking.Summary(algo, variant, np.arange(len(curve)) * 1000, np.array([curve, curve]), 1.0)
+
+
+@pytest.mark.parametrize(
+    ("sarsa_masked", "ppo", "verdicts"),
+    [
+        # Masked SARSA at 90 after 2000 steps, unmasked never; at PPO's final 95 after 3000 steps, PPO after 3000
+        ([0, 50, 90, 95], [0, 20, 80, 95], ["met", "met", "met"]),
+        # Masked SARSA at 90 after 3000 steps as unmasked; PPO reaches 95 sooner than either masked run
+        ([0, 50, 60, 90], [0, 95, 95, 95], ["met", "**not met**", "**not met**"]),
+    ],
+)
+def test_masking_targets(sarsa_masked: list[float], ppo: list[float], verdicts: list[str]) -> None:
+    summaries = {
+        ("reinforce", "masked"): masking_summary("reinforce", "masked", [0, 90, 92, 92]),
+        ("reinforce", "unmasked"): masking_summary("reinforce", "unmasked", [0, 10, 20, 91]),
+        ("nstep_sarsa", "masked"): masking_summary("nstep_sarsa", "masked", sarsa_masked),
+        ("nstep_sarsa", "unmasked"): masking_summary("nstep_sarsa", "unmasked", [0, 10, 20, 90]),
+        ("maskable_ppo", "masked"): masking_summary("maskable_ppo", "masked", ppo),
+    }
+    lines = masking.targets(summaries, masking.Settings(budget=3000))
+    assert [line.rsplit(": ", 1)[1].removesuffix(".") for line in lines] == verdicts

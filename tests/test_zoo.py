@@ -8,6 +8,7 @@ in-process, where that is quicker.
 """
 
 import argparse
+import importlib
 import inspect
 import json
 import os
@@ -39,6 +40,7 @@ from sb3_classic.zoo import (
     YAML_NAMES,
     ZooCompatibilityError,
     hyperparams_path,
+    maskable_eval_callback,
     one_thread_unless_chosen,
     register,
 )
@@ -635,6 +637,71 @@ def test_workflow(tmp_path: Path, algo: str, plot: str) -> None:
     (video,) = (tmp_path / "videos").glob("*.mp4")
     assert video.name.startswith(f"final-model-{algo}-CartPole-v1")
     assert video.stat().st_size > 1000
+
+
+# sb3-contrib's env with action masks, which refuses an illegal action: whatever predicts without its masks fails
+STRICT_MASKED_ENV = """
+import gymnasium as gym
+from sb3_contrib.common.envs import InvalidActionEnvDiscrete
+
+
+class StrictInvalidActionEnv(InvalidActionEnvDiscrete):
+    def __init__(self):
+        super().__init__(dim=20, ep_length=20, n_invalid_actions=15)
+
+    def step(self, action):
+        if int(action) in self.invalid_actions:
+            raise RuntimeError(f"illegal action {int(action)} in state {self.state}")
+        return super().step(action)
+
+
+gym.register("StrictMasked-v0", entry_point=StrictInvalidActionEnv)
+"""
+
+
+@pytest.mark.parametrize("algo", ["reinforce", "nstep_sarsa"])
+def test_train_evaluations_and_enjoy_use_the_envs_action_masks(tmp_path: Path, algo: str) -> None:
+    (tmp_path / "strict_masked_env.py").write_text(STRICT_MASKED_ENV)
+    # The env's module importable by --gym-packages, after the sb3_classic under test
+    env = {"PYTHONPATH": os.pathsep.join(filter(None, [os.environ.get("PYTHONPATH"), str(tmp_path)]))}
+    common = ["--algo", algo, "--env", "StrictMasked-v0", "--gym-packages", "strict_masked_env"]
+    result = run(
+        tmp_path,
+        *("-m", "rl_zoo3.train", *common, "-n", "400", "--seed", "0", "--eval-freq", "100", "--eval-episodes", "2"),
+        env=env,
+    )
+    assert "Using 'default' hyperparameters" in result.stdout
+    evaluations = np.load(tmp_path / "logs" / algo / "StrictMasked-v0_1" / "evaluations.npz")
+    assert list(evaluations["timesteps"]) == [100, 200, 300, 400]
+    assert evaluations["results"].shape == (4, 2)
+    enjoy = run(tmp_path, "-m", "rl_zoo3.enjoy", *common, "-f", "logs", "--no-render", "-n", "100", env=env)
+    assert enjoy.stdout.count("Episode Reward") == 5
+
+
+def test_zoo_evaluations_are_maskable_only_for_these_algorithms_and_envs_with_masks() -> None:
+    from rl_zoo3.exp_manager import ExperimentManager
+    from sb3_contrib.common.envs import InvalidActionEnvDiscrete
+    from sb3_contrib.common.maskable.callbacks import MaskableEvalCallback
+    from stable_baselines3.common.callbacks import EvalCallback
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    register()
+    masked = DummyVecEnv([lambda: InvalidActionEnvDiscrete(dim=4, n_invalid_actions=2)])
+    unmasked = DummyVecEnv([lambda: gym.make("CartPole-v1")])
+    assert type(maskable_eval_callback(masked, eval_freq=10)) is MaskableEvalCallback
+    assert type(maskable_eval_callback(unmasked, eval_freq=10)) is EvalCallback
+
+    def callbacks(algo: str) -> list[Any]:
+        manager = ExperimentManager(argparse.Namespace(), algo, "CartPole-v1", "logs", eval_freq=10)
+        manager.n_envs, manager.deterministic_eval = 1, True
+        manager.create_envs = lambda n_envs, eval_env=False, no_log=False: masked  # type: ignore[method-assign]
+        manager.create_callbacks()
+        return [type(callback) for callback in manager.callbacks]
+
+    assert callbacks("reinforce") == callbacks("nstep_sarsa") == [MaskableEvalCallback]
+    assert callbacks("ppo") == [EvalCallback]
+    # The zoo's module is left with its own EvalCallback
+    assert vars(importlib.import_module("rl_zoo3.exp_manager"))["EvalCallback"] is EvalCallback
 
 
 PARAMS: dict[str, dict[str, Any]] = {
