@@ -9,6 +9,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 import torch as th
 from stable_baselines3.common.base_class import BaseAlgorithm
@@ -86,13 +87,13 @@ def test_sarsa_logs_the_means_of_its_updates_predictions_and_targets(update_mode
         NStepSARSA, make_vec_env("CartPole-v1", n_envs=n_envs), seed=0, n_steps=2, train_freq=4, update_mode=update_mode
     )
     model.learn(64)  # past the first updates, whose batches can be shorter
-    steps: list[tuple[th.Tensor, th.Tensor]] = []
+    steps: list[tuple[np.ndarray, np.ndarray]] = []
     losses: list[float] = []
     gradient_step = model._gradient_step
 
-    def recorded(observations: th.Tensor, actions: th.Tensor, targets: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
+    def recorded(observations: np.ndarray, actions: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, float]:
         q_predicted, loss = gradient_step(observations, actions, targets)
-        steps.append((q_predicted, targets))
+        steps.append((q_predicted, targets.copy()))
         losses.append(float(loss))
         return q_predicted, loss
 
@@ -101,8 +102,8 @@ def test_sarsa_logs_the_means_of_its_updates_predictions_and_targets(update_mode
     dumped = model.logger.name_to_value
     # The update's first pass (per step: one gradient step per transition, then the next passes)
     first_pass = steps[: len(steps) // model.gradient_steps]
-    q_first = th.cat([q for q, _ in first_pass])
-    targets = th.cat([target for _, target in first_pass])
+    q_first = th.as_tensor(np.concatenate([q for q, _ in first_pass]))
+    targets = th.as_tensor(np.concatenate([target for _, target in first_pass]))
     # (An episode end in the update's steps changes how many targets complete: 4 × n_envs without one)
     assert dumped["train/n_transitions"] == len(targets) >= 2
     assert dumped["train/q_mean"] == pytest.approx(float(q_first.double().mean()), rel=1e-6)

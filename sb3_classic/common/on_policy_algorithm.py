@@ -535,8 +535,10 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
         super().dump_logs(iteration)
 
     def _excluded_save_params(self) -> list[str]:
-        # Decided by each learn() call from its env: a loaded model predicts with masks or without
-        return [*super()._excluded_save_params(), "_use_masking"]
+        # Decided by each learn() call from its env: a loaded model predicts with masks or without. "predict" and
+        # "save": an instance's own wrappers (the zoo's enjoy, which predicts with its env's masks; a population's
+        # learn), not training state
+        return [*super()._excluded_save_params(), "_use_masking", "predict", "save"]
 
     def _log_interval_choices(self) -> str:
         """:return: the values of ``learn(log_interval=...)`` beyond a count and None, for its error message"""
