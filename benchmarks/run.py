@@ -47,6 +47,7 @@ from sb3_classic.harness.common import (
     int_at_least,
     positive_int,
 )
+from sb3_classic.harness.lockstep import plan_lockstep
 from sb3_classic.harness.pool import report_missing, run_missing_runs
 from sb3_classic.harness.runner import RUN_FILE, DamagedRunError
 
@@ -107,13 +108,19 @@ def parse_budgets(values: Sequence[str], env_ids: Sequence[str], defaults: dict[
 
 
 def make_specs(
-    settings: Settings, env_ids: Sequence[str], algos: Sequence[str], overrides: dict[str, dict[str, Any]] | None = None
+    settings: Settings,
+    env_ids: Sequence[str],
+    algos: Sequence[str],
+    overrides: dict[str, dict[str, Any]] | None = None,
+    lockstep: bool = True,
 ) -> list[RunSpec]:
     """
     :param settings: what the benchmark runs
     :param env_ids: its envs
     :param algos: its algorithms
     :param overrides: per algorithm, keys replacing those of its YAML entries (``parse_overrides``)
+    :param lockstep: train the seeds of each of our settings in lockstep where its population covers it
+        (``plan_lockstep``); False: every run alone (``--separate``)
     :return: every run of the benchmark, seed by seed (so an interrupted benchmark has whole seeds done)
     """
     specs = []
@@ -127,7 +134,7 @@ def make_specs(
                         changed = yaml.safe_dump({**spec.hyperparams, **overrides[algo]}, sort_keys=True)
                         spec = replace(spec, hyperparams_yaml=changed)
                     specs.append(spec)
-    return specs
+    return plan_lockstep(specs, lockstep)
 
 
 def learning_header(
@@ -138,6 +145,7 @@ def learning_header(
     workers: int,
     scheduler: str | None = None,
     ran: int | None = None,
+    specs: Sequence[RunSpec] = (),
 ) -> str:
     """
     :param command: the command line
@@ -147,6 +155,7 @@ def learning_header(
     :param workers: the runs in parallel on this machine (without ``scheduler``)
     :param scheduler: the Dask scheduler the runs were sent to, if any
     :param ran: how many of the runs this command trained (the rest came from the cache); None: all of them
+    :param specs: the runs (which were trained in lockstep)
     :return: the markdown above the learning tables: the command, the settings and how to read the columns
     """
     budgets = ", ".join(f"{env_id} {settings.budgets[env_id]:,}" for env_id in env_ids)
@@ -162,6 +171,12 @@ def learning_header(
         where = "Runs on a Dask cluster (`--scheduler`), torch 1 thread each."
     if ran:
         where += f" This command trained {ran} of the runs; the rest were in the cache."
+    lockstep = sorted({LABELS[spec.algo] for spec in specs if spec.lockstep})
+    if lockstep:
+        where += (
+            f" The seeds of {', '.join(lockstep)} trained in lockstep (one population per setting, one process; each "
+            "run's learn time is its share of the population's); `--separate` trains each alone."
+        )
     return f"""# Learning benchmarks
 
 Produced by:
@@ -244,6 +259,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="try a change to the YAML entries of an algorithm (e.g. nstep_sarsa.max_grad_norm=10.0) on the benchmark's "
         "learning runs (not the throughput's); needs --results-dir, so that the committed results stay those of the YAML",
     )
+    parser.add_argument(
+        "--separate",
+        action="store_true",
+        help="train every seed alone, not the seeds of REINFORCE's and NStepSARSA's settings in lockstep (other cache "
+        "entries: the two ways draw the actions from different generators)",
+    )
     parser.add_argument("--skip-throughput", action="store_true", help="only the learning runs and their report")
     parser.add_argument("--throughput-steps", type=positive_int, help="env steps of each timed learn() (default 20,000)")
     parser.add_argument(
@@ -273,7 +294,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = shlex.join(["python", "-m", "benchmarks.run", *(sys.argv[1:] if argv is None else argv)])
     console = Console()
 
-    specs = make_specs(settings, args.envs, args.algos, overrides)
+    specs = make_specs(settings, args.envs, args.algos, overrides, lockstep=not args.separate)
     if not specs:
         parser.error(f"--seeds {settings.seeds} and --peer-seeds {settings.peer_seeds}: no run of {args.algos} to make")
     pending = [spec for spec in specs if not (spec.run_dir(args.cache_dir) / RUN_FILE).exists()]
@@ -301,7 +322,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if results.runs.empty:
         return report_missing(results.missing, console)
     ran = None if len(pending) == len(specs) else len({spec.key() for spec in pending})
-    header = learning_header(command, settings, args.envs, args.algos, args.workers, args.scheduler, ran)
+    header = learning_header(command, settings, args.envs, args.algos, args.workers, args.scheduler, ran, specs)
     path = write_learning_report(results, args.envs, args.algos, header, results_dir, footer=hyperparams_section(specs))
     crossings = threshold_crossings(results)
     for env_id in args.envs:

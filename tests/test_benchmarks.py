@@ -8,6 +8,7 @@ import queue
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from concurrent.futures import Future
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
@@ -562,7 +563,15 @@ def test_run_names_are_shown_as_they_are(
             pass
 
     monkeypatch.setattr(pool, "open_runs", lambda *args: contextlib.nullcontext(Runs()))
-    monkeypatch.setattr(pool, "_store", lambda spec, future, cache_dir: None if future.exception() is None else "boom")
+
+    def store(spec: RunSpec, result: Callable[[], Any], cache_dir: Path) -> str | None:
+        try:
+            result()
+        except RuntimeError as error:
+            return str(error)
+        return None
+
+    monkeypatch.setattr(pool, "_store", store)
     failed = pool.run_pending(specs, 1, tmp_path, Console(width=200))
     output = capsys.readouterr().out
     assert failed == specs[1:]

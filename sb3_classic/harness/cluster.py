@@ -13,7 +13,7 @@ anything is submitted, and again by each run.
 import hashlib
 import platform
 import queue
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from concurrent.futures import Future
 from contextlib import contextmanager
 from pathlib import Path
@@ -22,7 +22,7 @@ from distributed import Client, get_worker
 from rich.console import Console
 
 from sb3_classic.harness.common import RunSpec, code_versions
-from sb3_classic.harness.runner import ClusterError, RunResult, execute_run
+from sb3_classic.harness.runner import ClusterError, RunError, RunResult, execute_population, execute_run
 
 #: The topic of the workers' progress events (``[run name, env steps, worker address]``), which the client subscribes to
 PROGRESS_TOPIC = "sb3-classic-benchmark-progress"
@@ -96,6 +96,24 @@ def run_on_worker(spec: RunSpec, expected: dict[str, str]) -> RunResult:
     return execute_run(spec, WorkerProgress(), host)
 
 
+def run_population_on_worker(specs: Sequence[RunSpec], expected: dict[str, str]) -> list[RunResult | RunError]:
+    """
+    The task of a population (the lockstep runs of one setting) on a Dask worker: ``execute_population`` after
+    checking the worker's versions.
+
+    :param specs: the runs
+    :param expected: the client's ``worker_versions()``
+    :return: each run's result or error
+    :raise ClusterError: if the worker's versions differ from the client's (nothing is trained)
+    """
+    worker = get_worker()
+    host = f"{platform.node()} (Dask worker {worker.address})"
+    differences = version_differences(expected, worker_versions())
+    if differences:
+        raise ClusterError(f"{host} has other versions than the client ({'; '.join(differences)}): {_VERSIONS_FIX}")
+    return execute_population(specs, WorkerProgress(), host)
+
+
 class DaskRuns:
     """
     Runs on a Dask cluster, through its ``concurrent.futures`` interface.
@@ -116,6 +134,10 @@ class DaskRuns:
     def submit(self, spec: RunSpec) -> "Future[RunResult]":
         """:return: the future of ``spec`` run on a worker"""
         return self.executor.submit(run_on_worker, spec, self.expected)
+
+    def submit_population(self, specs: Sequence[RunSpec]) -> "Future[list[RunResult | RunError]]":
+        """:return: the future of the lockstep runs ``specs`` of one setting, trained together on one worker"""
+        return self.executor.submit(run_population_on_worker, specs, self.expected)
 
     def cancel(self) -> None:
         """Cancel the runs not finished (a run being trained finishes on its worker, unused)."""

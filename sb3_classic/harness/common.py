@@ -4,8 +4,10 @@ the others), the versions a result depends on, and the cache key of a run.
 """
 
 import argparse
+import dataclasses
 import difflib
 import hashlib
+import importlib
 import inspect
 import json
 from collections.abc import Callable
@@ -162,6 +164,30 @@ def code_versions(algo: str) -> dict[str, str]:
     return versions
 
 
+#: The population class of each algorithm that has one: (module, class)
+POPULATIONS = {
+    "nstep_sarsa": ("sb3_classic.sarsa.lockstep", "NStepSARSAPopulation"),
+    "reinforce": ("sb3_classic.reinforce.lockstep", "REINFORCEPopulation"),
+}
+
+
+def population_class(algo: str) -> Any:
+    """
+    :param algo: a harness algorithm's name
+    :return: its population class (``learn(total_timesteps, callback=[one per member])``), or None if it has none
+    """
+    if algo not in POPULATIONS:
+        return None
+    module_name, name = POPULATIONS[algo]
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as error:
+        if error.name != module_name:
+            raise
+        return None
+    return getattr(module, name)
+
+
 @dataclass(frozen=True)
 class RunSpec:
     """
@@ -179,6 +205,9 @@ class RunSpec:
         and ``n_timesteps`` is only a cap (a study's budget in episodes, as the seed report's); None: the step budget
     :param label: the run's name in progress displays and messages (default: algorithm, env and seed); not part of
         the key, so runs of the same settings named differently share their cache entry
+    :param lockstep: trained in lockstep with the other seeds of its setting (``harness.lockstep``: one population of
+        the algorithm, its seed a member of it) rather than alone; part of the key (the two ways draw the behaviour
+        policy's actions from different generators, so their results differ)
     """
 
     algo: str
@@ -190,6 +219,7 @@ class RunSpec:
     hyperparams_yaml: str
     max_episodes: int | None = None
     label: str | None = None
+    lockstep: bool = False
 
     @classmethod
     def create(cls, algo: str, env_id: str, seed: int, n_timesteps: int, eval_freq: int, n_eval_episodes: int) -> "RunSpec":
@@ -222,7 +252,14 @@ class RunSpec:
         if self.max_episodes is not None:
             # Only when set, so that the keys of step-budget runs cached before it existed stay the same
             content["max_episodes"] = self.max_episodes
+        if self.lockstep:
+            # Likewise: the key of a run trained alone is the same as before lockstep existed
+            content["training"] = "lockstep"
         return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()[:16]
+
+    def setting_key(self) -> str:
+        """:return: the key of the run's setting: its key but for the seed (the seeds of one setting share it)"""
+        return dataclasses.replace(self, seed=0, label=None).key()
 
     def run_dir(self, cache_dir: Path) -> Path:
         """

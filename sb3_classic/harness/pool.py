@@ -8,11 +8,11 @@ import multiprocessing
 import queue
 import signal
 import threading
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 from rich.console import Console
 from rich.markup import escape
@@ -27,7 +27,17 @@ from rich.progress import (
 )
 
 from sb3_classic.harness.common import RunSpec, code_versions
-from sb3_classic.harness.runner import ClusterError, RunError, RunResult, init_worker, run_in_worker, store_failure, store_run
+from sb3_classic.harness.lockstep import lockstep_jobs
+from sb3_classic.harness.runner import (
+    ClusterError,
+    RunError,
+    RunResult,
+    init_worker,
+    run_in_worker,
+    run_population_in_worker,
+    store_failure,
+    store_run,
+)
 
 
 class ProgressSource(Protocol):
@@ -46,6 +56,9 @@ class Runs(Protocol):
 
     def submit(self, spec: RunSpec) -> "Future[RunResult]":
         """:return: the future of ``spec``'s ``RunResult``"""
+
+    def submit_population(self, specs: Sequence[RunSpec]) -> "Future[list[RunResult | RunError]]":
+        """:return: the future of the results of the lockstep runs ``specs`` of one setting, trained together"""
 
     def cancel(self) -> None:
         """Cancel the runs not started, and stop those running where it can."""
@@ -68,6 +81,10 @@ class PoolRuns:
         # The versions now, the command's (cached from its start): a worker started after an edit of the package's
         # sources refuses the run before training it, instead of store_run refusing its result after
         return self.pool.submit(run_in_worker, spec, code_versions(spec.algo))
+
+    def submit_population(self, specs: Sequence[RunSpec]) -> "Future[list[RunResult | RunError]]":
+        """:return: the future of the results of the lockstep runs ``specs`` of one setting, trained in one process"""
+        return self.pool.submit(run_population_in_worker, specs, code_versions(specs[0].algo))
 
     def cancel(self) -> None:
         """Cancel the runs not started, and stop those running (the finished ones are cached already)."""
@@ -137,7 +154,11 @@ def run_pending(
     columns = (TextColumn("{task.description}"), BarColumn(), TaskProgressColumn(), TimeElapsedColumn(), TimeRemainingColumn())
     with open_runs(workers, scheduler, console) as runs, Progress(*columns, console=console) as progress:
         overall = progress.add_task(f"{len(specs)} runs", total=sum(spec.n_timesteps for spec in specs))
-        futures: dict[Future[RunResult], RunSpec] = {runs.submit(spec): spec for spec in specs}
+        # A run trained alone is a job of its own; the lockstep runs of a setting one job, a population
+        futures: dict[Future[Any], tuple[RunSpec, ...]] = {
+            (runs.submit(job[0]) if len(job) == 1 and not job[0].lockstep else runs.submit_population(job)): job
+            for job in lockstep_jobs(specs)
+        }
         by_name = {spec.name: spec for spec in specs}
         tasks: dict[str, TaskID] = {}
         steps = dict.fromkeys(by_name, 0)
@@ -167,19 +188,21 @@ def run_pending(
                     if name in by_name and name not in finished:
                         show(name, num_timesteps)
                 for future in done:
-                    spec = futures[future]
-                    finished.add(spec.name)
-                    if spec.name in tasks:
-                        show(spec.name, spec.n_timesteps)
-                    else:
-                        progress.advance(overall, spec.n_timesteps - steps[spec.name])
-                    message = _store(spec, future, cache_dir)
-                    if message is None:
-                        progress.console.print(f"done: {spec.name}", markup=False, highlight=False)
-                    else:
-                        failed.append(spec)
-                        failure = f"[red]failed: {escape(spec.name)}: {message}[/red]"
-                        progress.console.print(failure, markup=True, highlight=False)
+                    job = futures[future]
+                    for member, spec in enumerate(job):
+                        finished.add(spec.name)
+                        if spec.name in tasks:
+                            show(spec.name, spec.n_timesteps)
+                        else:
+                            progress.advance(overall, spec.n_timesteps - steps[spec.name])
+                        result = _job_result(future, member, alone=len(job) == 1 and not spec.lockstep)
+                        message = _store(spec, result, cache_dir)
+                        if message is None:
+                            progress.console.print(f"done: {spec.name}", markup=False, highlight=False)
+                        else:
+                            failed.append(spec)
+                            failure = f"[red]failed: {escape(spec.name)}: {message}[/red]"
+                            progress.console.print(failure, markup=True, highlight=False)
         except KeyboardInterrupt:
             runs.cancel()
             raise
@@ -254,14 +277,38 @@ def _sigterm_as_interrupt() -> Iterator[threading.Event]:
         signal.signal(signal.SIGTERM, previous)
 
 
-def _store(spec: RunSpec, future: "Future[RunResult]", cache_dir: Path) -> str | None:
+def _job_result(future: "Future[Any]", member: int, alone: bool) -> Callable[[], RunResult]:
     """
-    Write the finished run of ``future`` into the cache.
+    :param future: a job's: a run's ``RunResult``, or the results of a population's runs (``submit_population``)
+    :param member: the run's place in the job
+    :param alone: whether the job is a run trained alone
+    :return: a function that returns the run's result or raises its error
+    """
 
+    def result() -> RunResult:
+        outcome = future.result()
+        if alone:
+            return outcome
+        member_outcome = outcome[member]
+        if isinstance(member_outcome, RunError):
+            raise member_outcome
+        assert isinstance(member_outcome, RunResult)
+        return member_outcome
+
+    return result
+
+
+def _store(spec: RunSpec, result: Callable[[], RunResult], cache_dir: Path) -> str | None:
+    """
+    Write the finished run into the cache.
+
+    :param spec: the run
+    :param result: returns its result, or raises why it has none
+    :param cache_dir: the cache root
     :return: None, or why the run failed (its error; where its log was kept)
     """
     try:
-        store_run(spec, cache_dir, future.result())
+        store_run(spec, cache_dir, result())
     except RunError as error:
         return f"{escape(str(error))} (its log: {escape(str(store_failure(spec, cache_dir, error.log)))})"
     except Exception as error:

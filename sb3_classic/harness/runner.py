@@ -10,6 +10,7 @@ import signal
 import tempfile
 import time
 import traceback
+from collections.abc import Sequence
 from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -27,7 +28,7 @@ from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import sync_envs_normalization
 
-from sb3_classic.harness.common import RunSpec, code_versions, register_algorithms
+from sb3_classic.harness.common import RunSpec, code_versions, population_class, register_algorithms
 
 #: Files of a finished run (the run directory appears, complete, only when the run has finished)
 RUN_FILE = "run.json"
@@ -266,6 +267,96 @@ def execute_run(spec: RunSpec, queue: ProgressQueue | None = None, host: str | N
     return RunResult(summary=summary, files=files, host=host)
 
 
+def execute_population(
+    specs: Sequence[RunSpec], queue: ProgressQueue | None = None, host: str | None = None
+) -> list[RunResult | RunError]:
+    """
+    Train the lockstep runs of one setting (its seeds) as one population of their algorithm (``lockstep``), each run
+    with its own model, envs, callbacks and temporary folder built as ``execute_run`` builds them, and return each
+    run's files as ``execute_run`` does: the cache does not know which way a run was trained but from its key and its
+    ``run.json`` (``training``: ``"lockstep"``, ``population``: K). Each run's ``learn_time_s`` is its share, 1/K, of
+    the population's ``learn()`` (without the members' periodic evaluations), and its ``train.log`` the population's.
+
+    :param specs: the runs, of one setting (``RunSpec.setting_key``), marked ``lockstep``
+    :param queue: where to report progress (each run's name and its env steps), if anywhere
+    :param host: the machine it runs on, for messages (default: its hostname)
+    :return: each run's result, or its ``RunError`` (a member stopped by its env's NaN; every member's, if the
+        population failed as a whole)
+    :raise ValueError: for runs of different settings, or not marked ``lockstep``
+    """
+    if len({spec.setting_key() for spec in specs}) != 1 or not all(spec.lockstep for spec in specs):
+        raise ValueError("execute_population trains the lockstep runs of one setting: use lockstep_jobs to group them")
+    host = host or platform.node()
+    global _worker_scratch
+    with tempfile.TemporaryDirectory(prefix="sb3-classic-population-") as scratch:
+        _worker_scratch = scratch
+        root = Path(scratch)
+        th.set_num_threads(1)
+        log_path = root / "train.log"
+        with open(log_path, "w") as log:
+            try:
+                with redirect_stdout(log), redirect_stderr(log):
+                    outcomes = _train_population(specs, root, queue)
+            except Exception as error:
+                log.write(traceback.format_exc())
+                log.close()
+                text = log_path.read_text(errors="replace")
+                return [RunError(f"{error!r} on {host} (a population of {len(specs)} seeds)", text) for _ in specs]
+        text = log_path.read_text(errors="replace")
+        results: list[RunResult | RunError] = []
+        for folder, outcome in outcomes:
+            if isinstance(outcome, Exception):
+                results.append(RunError(f"{outcome!r} on {host}", text))
+                continue
+            (folder / "train.log").write_text(text)
+            (folder / RUN_FILE).write_text(json.dumps(outcome, indent=2, sort_keys=True))
+            files = {path.relative_to(folder).as_posix(): path.read_bytes() for path in folder.rglob("*") if path.is_file()}
+            results.append(RunResult(summary=outcome, files=files, host=host))
+    return results
+
+
+def _train_population(
+    specs: Sequence[RunSpec], root: Path, queue: ProgressQueue | None
+) -> list[tuple[Path, dict[str, Any] | Exception]]:
+    """:return: each member's folder, and its summary or the error that stopped it"""
+    trainings = []
+    for spec in specs:
+        folder = root / f"seed_{spec.seed}"
+        folder.mkdir()
+        trainings.append(_prepare(spec, folder, _write_config(spec, folder), queue))
+    population = population_class(specs[0].algo)
+    if population is None:
+        raise ValueError(f"{specs[0].algo} has no population class to train in lockstep: train its runs alone")
+    population = population([training.model for training in trainings])
+    member_errors: dict[int, Exception] = {}
+    start = time.perf_counter()
+    try:
+        population.learn(specs[0].n_timesteps, callback=[training.callbacks for training in trainings])
+    except ValueError as error:
+        # Members stopped by their envs' NaN (the population's MemberError): the others trained to the end
+        stopped = getattr(error, "member_errors", None)
+        if not isinstance(stopped, dict):
+            raise
+        member_errors.update(stopped)
+    learn_time = time.perf_counter() - start - sum(training.evaluation.eval_time for training in trainings)
+    how = {"training": "lockstep", "population": len(specs)}
+    outcomes: list[tuple[Path, dict[str, Any] | Exception]] = []
+    for k, training in enumerate(trainings):
+        outcome: dict[str, Any] | Exception
+        if k in member_errors:
+            outcome = member_errors[k]
+            assert training.model.env is not None
+            training.model.env.close()
+            training.eval_env.close()
+        else:
+            try:
+                outcome = _summary(training, learn_time / len(specs), how)
+            except RuntimeError as error:
+                outcome = error
+        outcomes.append((training.folder, outcome))
+    return outcomes
+
+
 def _version_differences(reference: dict[str, str], reference_label: str, other: dict[str, str], other_label: str) -> str:
     """:return: ``"name <other's> <other_label>, <reference's> <reference_label>"`` for each version that differs"""
     return ", ".join(
@@ -354,6 +445,24 @@ def run_in_worker(spec: RunSpec, expected: dict[str, str] | None = None) -> RunR
     :raise ValueError: if this process's versions differ from ``expected`` (the package's sources were edited since
         the command started: its result would have been refused by ``store_run`` after training)
     """
+    _check_versions(spec, expected)
+    return execute_run(spec, _worker_queue)
+
+
+def run_population_in_worker(specs: Sequence[RunSpec], expected: dict[str, str] | None = None) -> list[RunResult | RunError]:
+    """
+    ``execute_population`` in a pool process, reporting progress to the queue of ``init_worker``.
+
+    :param specs: the lockstep runs of one setting
+    :param expected: the command's ``code_versions`` when it started, if they are to be checked first
+    :return: each run's result or error
+    :raise ValueError: if this process's versions differ from ``expected`` (see ``run_in_worker``)
+    """
+    _check_versions(specs[0], expected)
+    return execute_population(specs, _worker_queue)
+
+
+def _check_versions(spec: RunSpec, expected: dict[str, str] | None) -> None:
     found = code_versions(spec.algo)
     if expected is not None and found != expected:
         differences = _version_differences(expected, "when the command started", found, "now")
@@ -362,7 +471,6 @@ def run_in_worker(spec: RunSpec, expected: dict[str, str] | None = None) -> RunR
             "sources were edited, or another version installed), and a result of other code than the command's is not "
             "cached. Run the command again once the code is settled: the finished runs are cached"
         )
-    return execute_run(spec, _worker_queue)
 
 
 def check_run(spec: RunSpec) -> None:
@@ -374,19 +482,30 @@ def check_run(spec: RunSpec) -> None:
     :param spec: the run
     :raise RunError: with the error the zoo or the algorithm raised, and the log of the attempt
     """
+    log = io.StringIO()
+    try:
+        with redirect_stdout(log), redirect_stderr(log):
+            model = built_model(spec)
+            assert model.env is not None
+            model.env.close()
+    except Exception as error:
+        raise RunError(f"{type(error).__name__}: {error}", log.getvalue() + traceback.format_exc()) from error
+
+
+def built_model(spec: RunSpec) -> BaseAlgorithm:
+    """
+    :param spec: a run
+    :return: its model, with its envs, built as ``execute_run`` builds it (rl-zoo3's ``ExperimentManager``), not
+        trained; the caller closes ``model.env``
+    :raise Exception: what the zoo or the algorithm raised for the setting
+    """
     with tempfile.TemporaryDirectory(prefix="sb3-classic-check-") as scratch:
         folder = Path(scratch)
         config = _write_config(spec, folder)
-        log = io.StringIO()
-        try:
-            with redirect_stdout(log), redirect_stderr(log):
-                setup = _experiment_manager(spec, folder, config).setup_experiment()
-                assert setup is not None, "the ExperimentManager only returns None when optimizing hyperparameters"
-                model, _ = setup
-                assert model.env is not None
-                model.env.close()
-        except Exception as error:
-            raise RunError(f"{type(error).__name__}: {error}", log.getvalue() + traceback.format_exc()) from error
+        setup = _experiment_manager(spec, folder, config).setup_experiment()
+        assert setup is not None, "the ExperimentManager only returns None when optimizing hyperparameters"
+        model, _ = setup
+        return model
 
 
 def _write_config(spec: RunSpec, folder: Path) -> Path:
@@ -415,7 +534,21 @@ def _experiment_manager(spec: RunSpec, folder: Path, config: Path) -> Experiment
     )
 
 
-def _train(spec: RunSpec, folder: Path, config: Path, queue: ProgressQueue | None) -> dict[str, Any]:
+@dataclass
+class _Training:
+    """A run set up to train: its model, envs and callbacks (``_prepare``), and what ``_summary`` reads after ``learn``."""
+
+    spec: RunSpec
+    folder: Path
+    exp_manager: ExperimentManager
+    model: BaseAlgorithm
+    eval_env: Any
+    evaluation: TimedEvalCallback
+    callbacks: list[BaseCallback]
+
+
+def _prepare(spec: RunSpec, folder: Path, config: Path, queue: ProgressQueue | None) -> _Training:
+    """:return: the run's model (rl-zoo3's ``ExperimentManager``), its evaluation env and its callbacks"""
     exp_manager = _experiment_manager(spec, folder, config)
     setup = exp_manager.setup_experiment()
     assert setup is not None, "the ExperimentManager only returns None when optimizing hyperparameters"
@@ -440,19 +573,38 @@ def _train(spec: RunSpec, folder: Path, config: Path, queue: ProgressQueue | Non
     if queue is not None:
         every = max(spec.n_timesteps // 200, 1)
         callbacks.append(ProgressCallback(spec.name, queue, every, spec.max_episodes, spec.n_timesteps))
+    return _Training(spec, folder, exp_manager, model, eval_env, evaluation, callbacks)
 
+
+def _train(spec: RunSpec, folder: Path, config: Path, queue: ProgressQueue | None) -> dict[str, Any]:
+    training = _prepare(spec, folder, config, queue)
     # model.learn, not exp_manager.learn: the zoo's swallows KeyboardInterrupt, and an interrupted run must not be cached
     start = time.perf_counter()
-    model.learn(spec.n_timesteps, callback=callbacks)
+    training.model.learn(spec.n_timesteps, callback=training.callbacks)
     learn_wall_time = time.perf_counter() - start
+    return _summary(training, learn_wall_time - training.evaluation.eval_time, {"training": "alone"})
+
+
+def _summary(training: _Training, learn_time: float, how: dict[str, Any]) -> dict[str, Any]:
+    """
+    The end of a run after ``learn``: its final evaluation, its episodes and evaluations written to its folder.
+
+    :param training: the run
+    :param learn_time: the wall-clock seconds of its ``learn()``, without its periodic evaluations
+    :param how: how it was trained (``training``: ``"alone"`` or ``"lockstep"``, and the population's size)
+    :return: its summary (``run.json``)
+    :raise RuntimeError: if it stopped before its budget
+    """
+    spec, model, evaluation, folder = training.spec, training.model, training.evaluation, training.folder
+    n_envs = training.exp_manager.n_envs
     if spec.max_episodes is None and model.num_timesteps < spec.n_timesteps:
         raise RuntimeError(f"{spec.name} stopped at {model.num_timesteps} of {spec.n_timesteps} steps")
     final_eval_time = _final_evaluation(model, evaluation)
     assert model.env is not None
     model.env.close()
-    eval_env.close()
+    training.eval_env.close()
 
-    episodes = episodes_from_monitors(Path(exp_manager.save_path), n_envs)
+    episodes = episodes_from_monitors(Path(training.exp_manager.save_path), n_envs)
     if spec.max_episodes is not None and len(episodes) < spec.max_episodes:
         raise RuntimeError(
             f"{spec.name} reached its step cap ({spec.n_timesteps} env steps) after {len(episodes)} of its "
@@ -464,7 +616,6 @@ def _train(spec: RunSpec, folder: Path, config: Path, queue: ProgressQueue | Non
         evaluation.evaluations_timesteps, evaluation.evaluations_results, evaluation.evaluations_length
     )
     evaluations.to_csv(folder / EVALUATIONS_FILE, index=False)
-    learn_time = learn_wall_time - evaluation.eval_time
     return {
         "algo": spec.algo,
         "env_id": spec.env_id,
@@ -485,6 +636,7 @@ def _train(spec: RunSpec, folder: Path, config: Path, queue: ProgressQueue | Non
         "torch_threads": th.get_num_threads(),
         "machine": f"{platform.machine()} {platform.processor() or platform.platform()}",
         "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        **how,
     }
 
 

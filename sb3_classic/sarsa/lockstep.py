@@ -193,6 +193,19 @@ class NStepSARSAPopulation:
         return models
 
 
+class MemberError(ValueError):
+    """
+    Members of a population stopped by an error of their own (their env's NaN), the others trained to the end.
+
+    :param message: what happened, naming the members
+    :param member_errors: each stopped member's error, by member index
+    """
+
+    def __init__(self, message: str, member_errors: dict[int, ValueError]) -> None:
+        super().__init__(message)
+        self.member_errors = member_errors
+
+
 def _refuse_save(*args: Any, **kwargs: Any) -> None:
     """A member's ``save`` while its population trains it."""
     raise RuntimeError(
@@ -221,9 +234,10 @@ def _finish_learn(
     if errors:
         first = min(errors)
         names = ", ".join(f"{k} (seed {models[k].seed})" for k in sorted(errors))
-        raise ValueError(
+        raise MemberError(
             f"NStepSARSAPopulation.learn: member {names} stopped, each as its last update left it (the others trained "
-            f"to the end); member {first}'s error: {errors[first]}"
+            f"to the end); member {first}'s error: {errors[first]}",
+            errors,
         ) from errors[first]
 
 
@@ -421,13 +435,29 @@ def check_members(models: Sequence[Any]) -> None:
         _check_member(k, model)
         for name in SHARED_SETTINGS:
             value, first = getattr(model, name), getattr(models[0], name)
-            if value != first:
+            if not same_setting(value, first):
                 raise ValueError(
                     f"member {k}'s {name}={value!r} differs from member 0's ({first!r}): a population's members share one "
                     "setting (every argument but seed and env); train members of other settings in a population of their own"
                 )
     # (raises for layers a stacked network does not hold)
     StackedMLP.from_sequentials([model.policy.q_net.q_net for model in models])
+
+
+#: The remaining progress at which two schedules are compared (``same_setting``)
+SCHEDULE_PROBES = (1.0, 0.75, 0.5, 0.25, 0.0)
+
+
+def same_setting(value: Any, other: Any) -> bool:
+    """
+    :param value: a member's setting (a number, a string, a dict, a space, an SB3 schedule)
+    :param other: another member's
+    :return: whether they are the same setting: equal, or two schedules (each member's own object, as rl-zoo3 builds
+        them) of the same values at the remaining progress 1, 0.75, 0.5, 0.25 and 0
+    """
+    if callable(value) and callable(other) and not isinstance(value, type):
+        return [float(value(p)) for p in SCHEDULE_PROBES] == [float(other(p)) for p in SCHEDULE_PROBES]
+    return bool(value == other)
 
 
 def _check_member(k: int, model: NStepSARSA) -> None:
@@ -476,4 +506,4 @@ def _check_member(k: int, model: NStepSARSA) -> None:
         )
 
 
-__all__ = ["NStepSARSAPopulation", "check_members"]
+__all__ = ["MemberError", "NStepSARSAPopulation", "check_members", "same_setting"]

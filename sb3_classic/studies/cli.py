@@ -6,6 +6,7 @@ where it runs: ``INSTALLED`` (folders in the working directory) or the repositor
 """
 
 import argparse
+import dataclasses
 import os
 import time
 from collections.abc import Sequence
@@ -141,6 +142,12 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
             f"CACHE_DIR/{REDUCED_RESULTS}/BUDGET)"
         ),
     )
+    parser.add_argument(
+        "--separate",
+        action="store_true",
+        help="train every run alone, not the seeds of a setting in lockstep (other cache entries: the two ways draw the "
+        "actions from different generators)",
+    )
     parser.add_argument("--list", action="store_true", help="list each study's runs and how many are cached; run nothing")
     parser.add_argument("--report-only", action="store_true", help="run nothing: outputs from the runs already cached")
     args = parser.parse_args(argv)
@@ -148,6 +155,8 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
 
     reduced = args.seeds is not None or args.episodes is not None or args.steps is not None
     studies, errors = load_studies(args.studies, args.seeds, args.episodes, args.steps)
+    if args.separate:
+        studies = [dataclasses.replace(study, lockstep=False) for study in studies]
     if errors:
         for error in errors:
             console.print(f"[red]{escape(str(error))}[/red]", highlight=False, soft_wrap=True)
@@ -161,7 +170,12 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
     # where and how, not the results): in the command each study's outputs show, and in a reduced run's folder
     options = {name: getattr(args, name) for name in ("seeds", "episodes", "steps") if getattr(args, name) is not None}
     budget = [item for name, value in options.items() for item in (f"--{name}", str(value))]
-    reduced_dir = args.cache_dir / REDUCED_RESULTS / "_".join(f"{name}-{value}" for name, value in options.items())
+    reduced_dir = (
+        args.cache_dir
+        / REDUCED_RESULTS
+        / "_".join([f"{name}-{value}" for name, value in options.items()] + (["separate"] if args.separate else []))
+    )
+    budget += ["--separate"] if args.separate else []
     results_dir = args.results_dir or (reduced_dir if reduced else defaults.results_dir)
 
     runs = [run for study in studies for run in study.runs()]

@@ -42,6 +42,7 @@ import rl_zoo3
 import yaml
 
 from sb3_classic.harness.common import THRESHOLDS, RunSpec, algorithm_defaults, register_algorithms, unknown_setting
+from sb3_classic.harness.lockstep import plan_lockstep
 from sb3_classic.zoo import YAML_NAMES
 
 METRICS = ("mean_return", "last_100_return", "episodes_to_threshold")
@@ -154,6 +155,8 @@ class StudySpec:
     :param smooth: episodes of the moving average drawn in the figure (1: none)
     :param notes: what the source leaves unstated, and the reading chosen
     :param path: the file it was read from
+    :param lockstep: train the seeds of each variant and reading in lockstep, one population of the algorithm, where
+        the population covers the setting (``harness.lockstep.plan_lockstep``); False: each run alone (``--separate``)
     """
 
     name: str
@@ -172,6 +175,7 @@ class StudySpec:
     smooth: int = 10
     notes: str = ""
     path: Path | None = field(default=None, compare=False)
+    lockstep: bool = True
 
     def zoo_entry(self, variant: str, reading: str = STATED) -> dict[str, Any]:
         """
@@ -220,7 +224,8 @@ class StudySpec:
                         label=label,
                     )
                     runs.append(StudyRun(variant, reading, seed, spec))
-        return runs
+        planned = plan_lockstep([run.spec for run in runs], self.lockstep)
+        return [dataclasses.replace(run, spec=spec) for run, spec in zip(runs, planned, strict=True)]
 
     def with_budget(self, seeds: int | None = None, episodes: int | None = None, steps: int | None = None) -> "StudySpec":
         """
