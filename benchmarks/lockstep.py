@@ -1,11 +1,14 @@
 """
 CPU seconds of K seeds of one NStepSARSA setting trained in lockstep (``NStepSARSAPopulation``) against the same K
-seeds trained one after the other (``model.learn``), in one process with one PyTorch thread: the per-step setting
-(2 × 128 MLP, n_steps 10 on CartPole-v1 and 5 on Acrobot-v1, learning_rate 5e-4, train_freq 1, gradient_steps 1,
-update_mode "per_step").
+seeds trained one after the other (``model.learn``), in one process with one PyTorch thread. Two families of settings
+(``--settings``): ``per_step``, the book's per-step mode (2 × 128 MLP, n_steps 10 on CartPole-v1 and 5 on Acrobot-v1,
+learning_rate 5e-4, train_freq 1, gradient_steps 1, update_mode "per_step"), and ``batch``, the tuned batch-mode
+entries of ``hyperparams/nstep_sarsa.yml`` (8 envs per seed, train_freq 16, gradient_steps 8, 2 × 256 MLP; Acrobot-v1's
+with its bootstrap network, weight average, λ-returns and Expected SARSA).
 
     python -m benchmarks.lockstep                       # writes benchmarks/results/lockstep.{csv,md}
-    python -m benchmarks.lockstep --k 10 --steps 3000
+    python -m benchmarks.lockstep --k 10 --steps 3000 --settings per_step
+    python -m benchmarks.lockstep --k 10 --batch-steps 20000 --settings batch
 
 Seconds are ``time.process_time`` of training only (the models are built before the clock starts).
 """
@@ -17,18 +20,22 @@ import platform
 import shlex
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import torch as th
 from stable_baselines3.common.env_util import make_vec_env
 
 from sb3_classic import NStepSARSA
-from sb3_classic.harness.common import positive_int
+from sb3_classic.harness.common import load_hyperparams, positive_int
 from sb3_classic.sarsa import NStepSARSAPopulation
 
 RESULTS = Path(__file__).resolve().parent / "results"
 N_STEPS = {"CartPole-v1": 10, "Acrobot-v1": 5}
 SETTING = "per_step: 2x128 MLP, lr 5e-4, train_freq 1, gradient_steps 1"
+#: The families of settings, in the order of the tables
+SETTINGS = ("per_step", "batch")
 
 
 def make_models(env_id: str, k: int) -> list[NStepSARSA]:
@@ -49,63 +56,146 @@ def make_models(env_id: str, k: int) -> list[NStepSARSA]:
     ]
 
 
-def timed(env_id: str, k: int, steps: int) -> tuple[float, float]:
-    """:return: CPU seconds of the K seeds one after the other, and in lockstep"""
-    models = make_models(env_id, k)
+def timed(make: Callable[[], list[NStepSARSA]], steps: int) -> tuple[float, float]:
+    """
+    :param make: builds the K members (called twice: once for each way of training them)
+    :param steps: env steps per seed
+    :return: CPU seconds of the K seeds one after the other, and in lockstep
+    """
+    models = make()
     start = time.process_time()
     for model in models:
         model.learn(steps)
     separate = time.process_time() - start
-    models = make_models(env_id, k)
+    models = make()
     start = time.process_time()
     NStepSARSAPopulation(models).learn(steps)
     return separate, time.process_time() - start
 
 
+def per_step_rows(env_ids: list[str], k: int, steps: int) -> list[dict[str, Any]]:
+    """:return: the rows of the per-step setting, one per env"""
+    rows = []
+    for env_id in env_ids:
+        separate, lockstep = timed(lambda env_id=env_id: make_models(env_id, k), steps)  # type: ignore[misc]
+        rows.append(row(env_id, f"{SETTING}, n_steps {N_STEPS[env_id]}", k, steps, separate, lockstep))
+    return rows
+
+
+def linear_schedule(initial_value: float) -> Callable[[float], float]:
+    """:return: the zoo's ``lin_<initial_value>``: the learning rate falls linearly to 0 over the training"""
+
+    def schedule(progress_remaining: float) -> float:
+        return progress_remaining * initial_value
+
+    return schedule
+
+
+def yaml_setting(env_id: str) -> tuple[int, dict[str, Any]]:
+    """
+    :param env_id: an env of ``hyperparams/nstep_sarsa.yml``
+    :return: its entry's ``n_envs`` and the model's arguments, read as the zoo reads them (``lin_`` a linear schedule,
+        ``policy_kwargs`` evaluated), one learning-rate schedule object for all the members (a setting they share)
+    """
+    hyperparams = load_hyperparams("nstep_sarsa", env_id)
+    n_envs = int(hyperparams.pop("n_envs", 1))
+    for key in ("n_timesteps", "policy"):
+        hyperparams.pop(key, None)
+    learning_rate = hyperparams.get("learning_rate")
+    if isinstance(learning_rate, str) and learning_rate.startswith("lin_"):
+        hyperparams["learning_rate"] = linear_schedule(float(learning_rate[len("lin_") :]))
+    if isinstance(hyperparams.get("policy_kwargs"), str):
+        hyperparams["policy_kwargs"] = eval(hyperparams["policy_kwargs"], {"__builtins__": {}, "dict": dict})
+    return n_envs, hyperparams
+
+
+def make_yaml_models(env_id: str, k: int) -> list[NStepSARSA]:
+    """:return: K members of the YAML's entry for ``env_id``, seeds 0..K-1, each with its own envs seeded as its model"""
+    n_envs, hyperparams = yaml_setting(env_id)
+    return [
+        NStepSARSA("MlpPolicy", make_vec_env(env_id, n_envs=n_envs, seed=seed), seed=seed, **hyperparams) for seed in range(k)
+    ]
+
+
+def batch_rows(env_ids: list[str], k: int, steps: int) -> list[dict[str, Any]]:
+    """:return: the rows of the YAML's batch-mode entries, one per env"""
+    rows = []
+    for env_id in env_ids:
+        n_envs, hyperparams = yaml_setting(env_id)
+        setting = (
+            f"batch: hyperparams/nstep_sarsa.yml's {env_id} entry (n_envs {n_envs}, train_freq {hyperparams['train_freq']}, "
+            f"gradient_steps {hyperparams['gradient_steps']}, 2x256 MLP)"
+        )
+        separate, lockstep = timed(lambda env_id=env_id: make_yaml_models(env_id, k), steps)  # type: ignore[misc]
+        rows.append(row(env_id, setting, k, steps, separate, lockstep))
+    return rows
+
+
+def row(env_id: str, setting: str, k: int, steps: int, separate: float, lockstep: float) -> dict[str, Any]:
+    """:return: a row of the CSV (``steps`` is kept for the table, not written to the CSV), printed as it is made"""
+    print(f"{env_id}, {setting.split(':')[0]}: separate {separate:.2f} s, lockstep {lockstep:.2f} s, "
+          f"{separate / lockstep:.2f}x", flush=True)  # fmt: skip
+    return dict(algo="NStepSARSA", env_id=env_id, setting=setting, k=k, separate_cpu_s=f"{separate:.2f}",
+                lockstep_cpu_s=f"{lockstep:.2f}", steps=steps)  # fmt: skip
+
+
+def settings_list(text: str) -> list[str]:
+    """:return: the families of settings named in ``text`` (comma-separated), each one of ``SETTINGS``"""
+    names = [name.strip() for name in text.split(",") if name.strip()]
+    unknown = [name for name in names if name not in SETTINGS]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"{text!r}: name some of {', '.join(SETTINGS)}, comma-separated")
+    return names
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--k", type=positive_int, default=10, help="seeds (members)")
-    parser.add_argument("--steps", type=positive_int, default=3000, help="env steps per seed")
+    parser.add_argument("--steps", type=positive_int, default=3000, help="env steps per seed of the per-step settings")
+    parser.add_argument(
+        "--batch-steps", type=positive_int, default=20000, help="env steps per seed (all its envs) of the batch settings"
+    )
     parser.add_argument("--env", nargs="+", default=list(N_STEPS), choices=list(N_STEPS))
+    parser.add_argument(
+        "--settings", type=settings_list, default=list(SETTINGS), help=f"comma-separated, of {', '.join(SETTINGS)}"
+    )
     parser.add_argument("--out", type=Path, default=RESULTS, help="the folder of lockstep.csv and lockstep.md")
     args = parser.parse_args(argv)
     th.set_num_threads(1)
     rows = []
-    for env_id in args.env:
-        separate, lockstep = timed(env_id, args.k, args.steps)
-        rows.append(dict(algo="NStepSARSA", env_id=env_id, setting=f"{SETTING}, n_steps {N_STEPS[env_id]}", k=args.k,
-                         separate_cpu_s=f"{separate:.2f}", lockstep_cpu_s=f"{lockstep:.2f}"))  # fmt: skip
-        print(f"{env_id}: separate {separate:.2f} s, lockstep {lockstep:.2f} s, {separate / lockstep:.2f}x", flush=True)
+    if "per_step" in args.settings:
+        rows += per_step_rows(args.env, args.k, args.steps)
+    if "batch" in args.settings:
+        rows += batch_rows(args.env, args.k, args.batch_steps)
     args.out.mkdir(parents=True, exist_ok=True)
+    columns = ["algo", "env_id", "setting", "k", "separate_cpu_s", "lockstep_cpu_s"]
     with open(args.out / "lockstep.csv", "w", newline="") as file:
-        writer = csv.DictWriter(file, fieldnames=list(rows[0]))
+        writer = csv.DictWriter(file, fieldnames=columns, extrasaction="ignore")
         writer.writeheader()
         writer.writerows(rows)
     command = "python -m benchmarks.lockstep " + shlex.join(argv if argv is not None else sys.argv[1:])
     table = "\n".join(
-        f"| {row['env_id']} | {row['k']} | {args.steps} | {row['separate_cpu_s']} | {row['lockstep_cpu_s']} | "
-        f"{float(row['separate_cpu_s']) / float(row['lockstep_cpu_s']):.2f}× |"
+        f"| {row['env_id']} | {row['setting'].split(':')[0]} | {row['k']} | {row['steps']} | {row['separate_cpu_s']} | "
+        f"{row['lockstep_cpu_s']} | {float(row['separate_cpu_s']) / float(row['lockstep_cpu_s']):.2f}× |"
         for row in rows
     )
+    settings = "\n".join(f"- {row['env_id']}, {row['setting']}" for row in rows)
     (args.out / "lockstep.md").write_text(
         f"""# K seeds in lockstep against one after the other
 
-NStepSARSA, {SETTING} (n_steps 10 on CartPole-v1, 5 on Acrobot-v1); CPU seconds (`time.process_time`) of training
-only, one process, one PyTorch thread (OMP_NUM_THREADS={os.environ.get("OMP_NUM_THREADS", "unset")}).
+NStepSARSA; CPU seconds (`time.process_time`) of training only, one process, one PyTorch thread
+(OMP_NUM_THREADS={os.environ.get("OMP_NUM_THREADS", "unset")}). The settings:
+
+{settings}
 
     {command.strip()}
 
 Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} logical CPUs (shared with other jobs while
 measured), Python {platform.python_version()}, torch {th.__version__}.
 
-| env | K | env steps per seed | one after the other (s) | lockstep (s) | ratio |
-|---|---|---|---|---|---|
+| env | setting | K | env steps per seed | one after the other (s) | lockstep (s) | ratio |
+|---|---|---|---|---|---|---|
 {table}
-
-Where the time goes (cProfile of 10 CartPole-v1 members, 1,500 env steps each): about half in the stacked gradient
-steps, 1.4 per env step (at an episode's end a member trains its last n transitions one per step before its next env
-step, so the members finish at different times), and half in each member's own Python work per env step (its env and
-VecEnv, the rollout loop's bookkeeping, its windows and targets), which lockstep does not share.
 """
     )
 

@@ -60,6 +60,65 @@ def test_member_trains_as_its_separate_run() -> None:
     assert all(p.is_contiguous() and p.untyped_storage().nbytes() == p.numel() * 4 for p in after)
 
 
+def learning_rate(progress_remaining: float) -> float:
+    # One schedule object for every member (a setting they share), as the YAML's lin_2e-3
+    return 2e-3 * progress_remaining
+
+
+BATCH_SETTING: dict[str, Any] = dict(
+    policy_kwargs=dict(net_arch=[32, 32], weight_init="default"),
+    n_steps=3,
+    learning_rate=learning_rate,
+    train_freq=4,
+    gradient_steps=3,
+    update_mode="batch",
+    max_grad_norm=1.0,
+)
+COPIES = dict(td_lambda=0.5, expected_sarsa=True, target_update_interval=1, tau=0.5, averaging_tau=0.05, gamma=0.999)
+
+
+@pytest.mark.parametrize(
+    ("n_envs", "kwargs"),
+    [
+        (1, BATCH_SETTING),
+        (3, {**BATCH_SETTING, **COPIES, "max_grad_norm": None}),
+        (2, {**SETTING, **COPIES, "train_freq": 3, "target_update_interval": 5}),
+    ],
+    ids=["batch", "batch-copies-envs", "per-step-copies-train-freq"],
+)
+def test_member_trains_as_its_separate_run_in_every_mode(n_envs: int, kwargs: dict[str, Any]) -> None:
+    # Members' batches differ in size (their episodes end at other times): each takes the mean loss of its own, and its
+    # copies of q̂ move after its own updates only
+    def make(seed: int) -> NStepSARSA:
+        return NStepSARSA("MlpPolicy", make_vec_env("CartPole-v1", n_envs=n_envs, seed=seed), seed=seed, **kwargs)
+
+    steps = 75 * kwargs["train_freq"] * n_envs // 3
+    separate = []
+    for seed in (0, 1, 2):
+        model = make(seed)
+        model._action_rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(0,)))
+        separate.append(model.learn(steps))
+    members = [make(seed) for seed in (0, 1, 2)]
+    NStepSARSAPopulation(members).learn(steps)
+    for member, model in zip(members, separate, strict=True):
+        assert member._n_updates == model._n_updates
+        assert model.rollout_buffer.pos == member.rollout_buffer.pos
+        assert member._completed_episodes == model._completed_episodes
+        assert member.num_timesteps == model.num_timesteps == steps
+        assert max_difference(member, model) < 1e-5
+        for name in ("q_net_target", "q_net_average"):
+            own, theirs = getattr(member.policy, name), getattr(model.policy, name)
+            assert (own is None) == (theirs is None) == ("tau" not in kwargs)
+            if own is not None:
+                pairs = zip(own.parameters(), theirs.parameters(), strict=True)
+                assert max((p - q).abs().max().item() for p, q in pairs) < 1e-5
+                assert all(p.is_contiguous() and not p.requires_grad for p in own.parameters())
+    updates = members[0]._n_updates // kwargs["gradient_steps"]
+    assert updates >= (20 if kwargs["update_mode"] == "batch" else 60)
+    # (their episodes ended at other steps: their batches differed in size)
+    assert len({model._completed_episodes for model in members}) > 1
+
+
 def test_a_population_repeats_itself_and_saves_ordinary_models(tmp_path: Path) -> None:
     runs = [NStepSARSAPopulation([make_member(seed) for seed in (3, 4)]).learn(60) for _ in range(2)]
     for first, second in zip(*runs, strict=True):
@@ -165,9 +224,6 @@ def test_gradients_are_clipped_per_member() -> None:
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        (dict(update_mode="batch", train_freq=1), "update_mode='batch'"),
-        (dict(train_freq=2), "train_freq=2"),
-        (dict(target_update_interval=10), "target_update_interval=10"),
         (dict(policy="LinearPolicy", policy_kwargs=None), "LinearPolicy"),
         (dict(policy_kwargs=dict(net_arch=[32, 32], layer_norm=True)), "LayerNorm"),
     ],

@@ -60,9 +60,17 @@ class NStepSARSAPopulation:
     episode boundaries, logger, callback and n-step targets (its own ``_training_batch``), as if it ran alone; what the
     members share is q̂'s arithmetic. Their q̂s are one ``StackedMLP`` (weights (K, in, out) per layer, one
     ``torch.baddbmm`` per layer): one stacked forward pass chooses every member's action at each env step, and one
-    stacked gradient step per transition index trains them, with one ``StackedAdam`` (each member its own Adam step
-    count; a member with nothing to train at a step is not moved) and, where ``max_grad_norm`` is set, each member's
-    gradient clipped to its own global norm.
+    stacked gradient step trains every member with a gradient step to take, with one ``StackedAdam`` (each member its
+    own Adam step count and learning rate; a member with nothing to train at a step is not moved) and, where
+    ``max_grad_norm`` is set, each member's gradient clipped to its own global norm. A member's update makes the
+    gradient steps of its separate run's ``train``: in the per-step mode one per transition, in time order, in the
+    batch mode ``gradient_steps`` on the mean loss of its whole batch. The members' batches differ in size (their
+    episodes end at other steps): a stacked step takes them side by side, padded with zeros to the longest, and each
+    member's loss is the mean over its own transitions only.
+
+    The copies of q̂ (the bootstrap network of ``target_update_interval``, the weight average of ``averaging_tau``)
+    are stacked as q̂ is, each member's copy a view of its slice: each member's targets bootstrap from its own copy,
+    and its ``_move_copies`` moves its copy (w⁻ ← τw + (1 − τ)w⁻) after its own updates only, as in its separate run.
 
     Member k starts from its own model's weights (those of the separate run with seed k) and Adam state. While
     ``learn`` runs, each member's q̂ parameters are views into the stacked tensors (the same ``Parameter`` objects, with
@@ -78,14 +86,17 @@ class NStepSARSAPopulation:
     seed sees the same transitions only where it draws the same (``model._action_rng`` set to that generator, as the
     tests do).
 
-    Covered: ``update_mode="per_step"`` with ``train_freq=1`` (any ``gradient_steps``, ``n_steps``, ``loss_function``,
-    ``expected_sarsa``, ``td_lambda``, schedules and decays, several envs per member), ``"MlpPolicy"`` (linear layers
-    and elementwise activations) over flat Box observations, and ``torch.optim.Adam`` without weight decay, AMSGrad or
-    ``maximize``. Anything else is refused with a ``ValueError``/``TypeError`` that names it.
+    Covered: both ``update_mode`` values with any ``train_freq``, ``gradient_steps`` and ``n_steps`` (the batch mode of
+    the tuned settings included), ``loss_function``, ``expected_sarsa``, ``td_lambda``, the copies of q̂
+    (``target_update_interval``, ``tau``, ``averaging_tau``), schedules and decays, several envs per member;
+    ``"MlpPolicy"`` (linear layers and elementwise activations) over flat Box observations, and ``torch.optim.Adam``
+    without weight decay, AMSGrad or ``maximize``. Anything else (``"LinearPolicy"``, LayerNorm, CNN or Dict
+    observations, another optimizer) is refused with a ``ValueError``/``TypeError`` that names it; action masks are not
+    read (each member chooses over every action).
 
     :param models: the members, ``NStepSARSA`` models of one setting (every argument but ``seed`` and ``env``), each
         with its own seed (not None) and env
-    :raises ValueError: for members of different settings, without a seed or an env, or of a setting not covered
+    :raises ValueError: for members of different settings, or without a seed or an env
     :raises TypeError: for a q̂ or optimizer not covered
     """
 
@@ -179,10 +190,10 @@ class NStepSARSAPopulation:
                     if batch is None:
                         _dump(model, iterations[k], log_interval)
                     else:
-                        updates[k] = _MemberUpdate(batch, model.gradient_steps)
+                        updates[k] = _MemberUpdate(batch, model._update_slices(len(batch.targets)), model.gradient_steps)
                 for k in trainer.step(updates):
                     update = updates.pop(k)
-                    models[k]._finish_update(update.batch, update.length, update.q_first, update.losses)
+                    models[k]._finish_update(update.batch, update.n_chunks, update.q_first, update.losses)
                     _dump(models[k], iterations[k], log_interval)
         finally:
             trainer.close()
@@ -244,21 +255,32 @@ def _finish_learn(
 class _MemberUpdate:
     """
     A member's update in progress: its transitions (``NStepSARSA._start_update``'s batch), trained one stacked step at
-    a time, and what ``_finish_update`` logs of them.
+    a time as ``NStepSARSA.train`` trains them (``_update_slices``: the whole batch at each of ``gradient_steps`` steps
+    in the batch mode, one transition after the other, ``gradient_steps`` passes, in the per-step mode), and what
+    ``_finish_update`` logs of them.
 
     :param batch: the update's transitions
+    :param chunks: what each gradient step of one pass takes (``NStepSARSA._update_slices``)
     :param gradient_steps: passes over them
     """
 
-    def __init__(self, batch: TrainingBatch, gradient_steps: int) -> None:
+    def __init__(self, batch: TrainingBatch, chunks: list[slice], gradient_steps: int) -> None:
         self.batch = batch
         self.length = len(batch.targets)
         self.observations = np.asarray(batch.observations, dtype=np.float32).reshape(self.length, -1)
+        self.actions = np.asarray(batch.actions, dtype=np.int64).reshape(self.length)
+        self.chunks = chunks
+        self.n_chunks = len(chunks)
         #: the gradient steps of the update, and those made
-        self.rounds, self.round = gradient_steps * self.length, 0
-        #: q̂(S_t, A_t) before the first pass, one array per transition, and every gradient step's loss
+        self.rounds, self.round = gradient_steps * self.n_chunks, 0
+        #: q̂(S_t, A_t) before the first pass, one array per chunk, and every gradient step's loss
         self.q_first: list[np.ndarray] = []
         self.losses: list[float] = []
+
+    @property
+    def chunk(self) -> slice:
+        """The transitions of the next gradient step."""
+        return self.chunks[self.round % self.n_chunks]
 
 
 def _dump(model: NStepSARSA, iteration: int, log_interval: int | None) -> None:
@@ -283,6 +305,18 @@ class _LockstepTrainer:
         self.stacked.to(device)
         self.device = device
         self.stacked.share_with(self.networks)
+        # The copies of q̂ (bootstrap network, weight average) stacked as q̂ is, each member's copy a view of its slice:
+        # its own code reads and moves them (its targets' bootstrap values, _move_copies' Polyak updates) as in its
+        # separate run, on its slice only
+        self.copies: list[tuple[StackedMLP, list[nn.Sequential]]] = []
+        for name in ("q_net_target", "q_net_average"):
+            if getattr(models[0].policy, name) is not None:
+                copies = [getattr(model.policy, name).q_net for model in models]
+                stacked_copy = StackedMLP.from_sequentials(copies)
+                stacked_copy.requires_grad_(False)
+                stacked_copy.to(device)
+                stacked_copy.share_with(copies)
+                self.copies.append((stacked_copy, copies))
         # Member k's own parameters, in the stacked parameters' order, and how a stacked slice maps onto each
         self.member_parameters: list[list[th.Tensor]] = []
         for network in self.networks:
@@ -338,9 +372,9 @@ class _LockstepTrainer:
 
     def step(self, updates: dict[int, "_MemberUpdate"]) -> list[int]:
         """
-        One stacked gradient step: every member with an update in progress takes the gradient step of its next
-        transition (``NStepSARSA.train``'s per-step mode: its transitions one after the other in time order,
-        ``gradient_steps`` passes); the others are not stepped.
+        One stacked gradient step: every member with an update in progress takes the gradient step of its next chunk
+        (``NStepSARSA.train``'s: its whole batch in the batch mode, its next transition in time order in the per-step
+        mode, ``gradient_steps`` times over); the others are not stepped.
 
         :param updates: the members' updates in progress, by member
         :return: the members whose update this step finished
@@ -348,61 +382,85 @@ class _LockstepTrainer:
         if not updates:
             return []
         n_members = len(self.models)
-        x = np.zeros((n_members, 1, self.features), dtype=np.float32)
-        actions = np.zeros((n_members, 1, 1), dtype=np.int64)
-        targets = np.zeros(n_members, dtype=np.float32)
+        chunks = {k: update.chunk for k, update in updates.items()}
+        sizes = np.zeros(n_members, dtype=np.int64)
         for k, update in updates.items():
-            transition = update.round % update.length
-            x[k, 0] = update.observations[transition]
-            actions[k, 0, 0] = update.batch.actions[transition]
-            targets[k] = update.batch.targets[transition]
+            sizes[k] = len(range(*chunks[k].indices(update.length)))
+        width = int(sizes.max())
+        # The members' chunks side by side, padded with zeros to the longest (the padding weighs nothing in the losses)
+        x = np.zeros((n_members, width, self.features), dtype=np.float32)
+        actions = np.zeros((n_members, width, 1), dtype=np.int64)
+        targets = np.zeros((n_members, width), dtype=np.float32)
+        for k, update in updates.items():
+            chunk, size = chunks[k], sizes[k]
+            x[k, :size] = update.observations[chunk]
+            actions[k, :size, 0] = update.actions[chunk]
+            targets[k, :size] = update.batch.targets[chunk]
         learning_rates = np.array([model.policy.optimizer.param_groups[0]["lr"] for model in self.models], dtype=np.float64)
         active = np.array(list(updates))
-        q_predicted, member_losses = self._gradient_step(x, actions, targets, active, learning_rates)
+        q_predicted, member_losses = self._gradient_step(x, actions, targets, sizes, active, learning_rates)
         finished = []
         for k, update in updates.items():
-            update.losses.append(member_losses[k])
-            if update.round < update.length:
-                update.q_first.append(np.array([q_predicted[k]], dtype=np.float32))
+            update.losses.append(float(member_losses[k]))
+            if update.round < update.n_chunks:
+                update.q_first.append(q_predicted[k, : sizes[k]])
             update.round += 1
             if update.round == update.rounds:
                 finished.append(k)
         return finished
 
     def _gradient_step(
-        self, x: np.ndarray, actions: np.ndarray, targets: np.ndarray, members: np.ndarray, learning_rates: np.ndarray
-    ) -> tuple[list[float], list[float]]:
+        self,
+        x: np.ndarray,
+        actions: np.ndarray,
+        targets: np.ndarray,
+        sizes: np.ndarray,
+        members: np.ndarray,
+        learning_rates: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """
-        One gradient step of the given members, each on its own transition (``NStepSARSA._gradient_step`` with a batch
-        of one).
+        One gradient step of the given members, each on the mean loss of its own transitions
+        (``NStepSARSA._gradient_step``).
 
-        :param x: S_t of every member (zeros for the others), shape (K, 1, features)
-        :param actions: A_t, shape (K, 1, 1)
-        :param targets: G_{t:t+n}, shape (K,)
+        :param x: S_t of every member's transitions, padded with zeros to the longest, shape (K, B, features)
+        :param actions: A_t, shape (K, B, 1)
+        :param targets: G_{t:t+n}, shape (K, B)
+        :param sizes: how many of the B are member k's (the rest is padding), shape (K,); 0 for the members not stepped
         :param members: the members to step, shape (M,)
         :param learning_rates: every member's α, shape (K,)
-        :return: every member's q̂(S_t, A_t) before the step and loss (meaningful for the given members)
+        :return: every member's q̂(S_t, A_t) before the step, shape (K, B), and its loss, shape (K,) (meaningful for
+            the given members and their own transitions)
         """
-        q_predicted = self.stacked(th.as_tensor(x, device=self.device)).gather(2, th.as_tensor(actions, device=self.device))
-        q_predicted = q_predicted.view(-1)
-        target = th.as_tensor(targets, device=self.device)
+        device = self.device
+        q_predicted = self.stacked(th.as_tensor(x, device=device)).gather(2, th.as_tensor(actions, device=device))
+        q_predicted = q_predicted.squeeze(2)
+        target = th.as_tensor(targets, device=device)
         # w ← w + α [G_{t:t+n} − q̂(S_t, A_t, w)] ∇q̂(S_t, A_t, w) (S&B eq. 10.5): the gradient of ½(G − q̂)², each
         # member's own (a sum over members: member k's parameters get its loss's gradient only)
         if self.huber:
-            member_losses = F.smooth_l1_loss(q_predicted, target, reduction="none")
+            losses = F.smooth_l1_loss(q_predicted, target, reduction="none")
         else:
-            member_losses = 0.5 * F.mse_loss(q_predicted, target, reduction="none")
-        index = th.as_tensor(members, device=self.device)
+            losses = 0.5 * F.mse_loss(q_predicted, target, reduction="none")
+        if x.shape[1] == 1:
+            member_losses = losses.view(-1)
+        else:
+            # Each member's mean over its own transitions, as the mean loss of its separate run's batch
+            valid = th.as_tensor(np.arange(x.shape[1]) < sizes[:, None], device=device)
+            counts = th.as_tensor(np.maximum(sizes, 1), dtype=losses.dtype, device=device)
+            member_losses = th.where(valid, losses, 0.0).sum(dim=1) / counts
+        index = th.as_tensor(members, device=device)
         self.optimizer.zero_grad()
         member_losses.index_select(0, index).sum().backward()
         if self.max_grad_norm is not None and np.isfinite(self.max_grad_norm):
             clip_grad_norms_per_member(self.parameters, self.max_grad_norm)
         self.optimizer.step(members, learning_rates)
-        return q_predicted.detach().cpu().tolist(), member_losses.detach().cpu().tolist()
+        return q_predicted.detach().cpu().numpy(), member_losses.detach().cpu().numpy()
 
     def close(self) -> None:
         """Each member's parameters get storage of their own again, and its optimizer its slice's Adam state."""
         StackedMLP.own_storage(self.networks)
+        for _, copies in self.copies:
+            StackedMLP.own_storage(copies)
         steps = self.optimizer.steps
         for k, model in enumerate(self.models):
             state = model.policy.optimizer.state
@@ -421,8 +479,7 @@ class _LockstepTrainer:
 def check_members(models: Sequence[Any]) -> None:
     """
     :param models: the would-be members of a population
-    :raises ValueError: for no members, a model twice, members of different settings, without a seed or an env, or of
-        a setting not covered (the batch mode, ``train_freq`` other than 1, copies of q̂)
+    :raises ValueError: for no members, a model twice, members of different settings, or without a seed or an env
     :raises TypeError: for a member that is not ``NStepSARSA``, or a q̂ or optimizer not covered
     """
     if len(models) == 0:
@@ -466,18 +523,6 @@ def _check_member(k: int, model: NStepSARSA) -> None:
         raise ValueError(f"member {k}: seed=None; build each member with a seed of its own (NStepSARSA(..., seed=k))")
     if model.env is None:
         raise ValueError(f"{name} has no env to train on: build it with one, or call model.set_env(env) first")
-    if model.update_mode != "per_step" or model.train_freq != 1:
-        raise ValueError(
-            f"{name}: update_mode={model.update_mode!r}, train_freq={model.train_freq}: a population trains the per-step "
-            "mode with train_freq=1 (update_mode='per_step', train_freq=1); train other settings one model after the "
-            "other (model.learn)"
-        )
-    if model.target_update_interval is not None or model.averaging_tau is not None:
-        raise ValueError(
-            f"{name}: target_update_interval={model.target_update_interval!r}, averaging_tau={model.averaging_tau!r}: a "
-            "population's q̂ has no copies (bootstrap network, weight average); leave both None, or train one model after "
-            "the other (model.learn)"
-        )
     policy = model.policy
     if isinstance(policy, LinearQPolicy):
         raise TypeError(
