@@ -196,7 +196,11 @@ class StackedAdam:
     n-step SARSA's members at an episode's end train several transitions one after the other while the others train one
     or none. Here each member's slice of each stacked parameter is a tensor of its own (a view) with its own step count,
     and a step passes the slices of the members it moves to torch's functional ``torch.optim.adam.adam``: the
-    arithmetic is ``torch.optim.Adam``'s, fused or not as the members' optimizers are.
+    arithmetic is ``torch.optim.Adam``'s, fused or not as the members' optimizers are. A step of every member when
+    all have the same step count and learning rate (the members of a population whose updates keep in step) passes
+    the whole stacked tensors instead, with one step count each: the same elementwise arithmetic on the same values,
+    in one kernel call per parameter rather than K (torch's kernels cost a fixed overhead per tensor, which dominates
+    at the sizes of small networks).
 
     :param parameters: the stacked parameters, member first
     :param n_members: K
@@ -227,6 +231,10 @@ class StackedAdam:
         self._exp_avg_slices = [exp_avg.unbind(0) for exp_avg in self.exp_avgs]
         self._exp_avg_sq_slices = [exp_avg_sq.unbind(0) for exp_avg_sq in self.exp_avg_sqs]
         scalar = th.float32
+        # Every member's step count t; the slices' own counts (below) are brought up to date before a slice step
+        # whenever a whole-stack step moved them all
+        self._member_steps = np.zeros(n_members, dtype=np.int64)
+        self._slice_steps_stale = False
         self._steps = [
             [th.zeros((), dtype=scalar, device=parameter.device) for _ in range(n_members)] for parameter in self.parameters
         ]
@@ -234,12 +242,21 @@ class StackedAdam:
     @property
     def steps(self) -> np.ndarray:
         """Each member's step count t, shape (K,)."""
-        return np.array([int(step) for step in self._steps[0]], dtype=np.int64)
+        return self._member_steps.copy()
 
     def set_state(self, member: int, step: int) -> None:
         """:param member: k; :param step: its step count t (its moments are set in ``exp_avgs``/``exp_avg_sqs``)"""
+        self._sync_slice_steps()
+        self._member_steps[member] = step
         for steps in self._steps:
             steps[member].fill_(step)
+
+    def _sync_slice_steps(self) -> None:
+        if self._slice_steps_stale:
+            for steps in self._steps:
+                for member, step in enumerate(steps):
+                    step.fill_(int(self._member_steps[member]))
+            self._slice_steps_stale = False
 
     def zero_grad(self) -> None:
         """Drop the gradients (``set_to_none``, as torch's optimizers)."""
@@ -254,6 +271,12 @@ class StackedAdam:
         :param members: the members to step, shape (M,)
         :param learning_rates: every member's learning rate α, shape (K,)
         """
+        counts = self._member_steps[members]
+        if len(members) == self.n_members and (counts == counts[0]).all() and (learning_rates == learning_rates[0]).all():
+            self._step_whole_stack(int(counts[0]), float(learning_rates[0]))
+            return
+        self._sync_slice_steps()
+        self._member_steps[members] += 1
         grads = [
             (th.zeros_like(parameter) if parameter.grad is None else parameter.grad).unbind(0) for parameter in self.parameters
         ]
@@ -277,3 +300,27 @@ class StackedAdam:
                 eps=self.eps,
                 maximize=False,
             )
+
+    def _step_whole_stack(self, step: int, learning_rate: float) -> None:
+        """A step of every member, all at step count ``step`` with one learning rate: torch's ``adam`` on the stacks."""
+        device = self.parameters[0].device
+        adam(
+            [parameter.data for parameter in self.parameters],
+            [th.zeros_like(parameter) if parameter.grad is None else parameter.grad for parameter in self.parameters],
+            self.exp_avgs,
+            self.exp_avg_sqs,
+            [],
+            # (one count per tensor: torch's adam increments each of them)
+            [th.tensor(float(step), dtype=th.float32, device=device) for _ in self.parameters],
+            foreach=self.foreach,
+            fused=self.fused,
+            amsgrad=False,
+            beta1=self.beta1,
+            beta2=self.beta2,
+            lr=learning_rate,
+            weight_decay=0.0,
+            eps=self.eps,
+            maximize=False,
+        )
+        self._member_steps += 1
+        self._slice_steps_stale = True
