@@ -208,6 +208,11 @@ class StackedAdam:
     :param eps: ε
     :param fused: torch's fused kernel (the members' optimizers' ``fused``)
     :param foreach: torch's multi-tensor path (their ``foreach``)
+    :param flush_denormal: flush denormal numbers to zero during each step (``torch.set_flush_denormal``, on the CPUs
+        that support it; off again after the step, torch's default, as torch cannot read the setting): Adam's second
+        moments of weights whose gradients are rarely non-zero decay into the denormal range, where the CPU's
+        arithmetic is many times slower (the fused step of a small network's Adam then costs several times its normal
+        cost). The update changes only where a moment or weight below 1.2e-38 in magnitude is read or written as 0
     """
 
     def __init__(
@@ -218,8 +223,10 @@ class StackedAdam:
         eps: float = 1e-8,
         fused: bool | None = None,
         foreach: bool | None = None,
+        flush_denormal: bool = False,
     ) -> None:
         self.parameters = list(parameters)
+        self.flush_denormal = flush_denormal
         self.n_members = n_members
         self.beta1, self.beta2 = betas
         self.eps = eps
@@ -271,6 +278,16 @@ class StackedAdam:
         :param members: the members to step, shape (M,)
         :param learning_rates: every member's learning rate α, shape (K,)
         """
+        if not self.flush_denormal:
+            self._step(members, learning_rates)
+            return
+        th.set_flush_denormal(True)
+        try:
+            self._step(members, learning_rates)
+        finally:
+            th.set_flush_denormal(False)
+
+    def _step(self, members: np.ndarray, learning_rates: np.ndarray) -> None:
         counts = self._member_steps[members]
         if len(members) == self.n_members and (counts == counts[0]).all() and (learning_rates == learning_rates[0]).all():
             self._step_whole_stack(int(counts[0]), float(learning_rates[0]))

@@ -450,6 +450,8 @@ class _LockstepTrainer:
             eps=group["eps"],
             fused=group["fused"],
             foreach=group["foreach"],
+            # (the members' separate runs spend most of their Adam steps' time on denormal second moments)
+            flush_denormal=True,
         )
         self._load_adam_states()
         #: the length of a flattened observation
