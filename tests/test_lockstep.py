@@ -266,6 +266,14 @@ def test_flushing_denormals_changes_no_normal_value() -> None:
     assert (th.tensor(1e-38) * 0.1).item() != 0.0
 
 
+def test_a_stacked_inference_is_its_forward_pass() -> None:
+    networks = [th.nn.Sequential(th.nn.Linear(3, 5), th.nn.Tanh(), th.nn.Linear(5, 2, bias=False)) for _ in range(3)]
+    stacked = StackedMLP.from_sequentials(networks)
+    x = th.randn(3, 4, 3)
+    assert th.equal(stacked.inference(x), stacked(x).detach())
+    assert not stacked.inference(x).requires_grad
+
+
 def test_gradients_are_clipped_per_member() -> None:
     grads = [th.randn(3, 4, 5) * th.tensor([0.01, 1.0, 100.0]).view(3, 1, 1), th.randn(3, 1, 5)]
     parameters = [th.zeros_like(grad, requires_grad=True) for grad in grads]

@@ -482,9 +482,8 @@ class _LockstepTrainer:
     def q_values(self) -> np.ndarray:
         """:return: q̂(S, ·) of every member's current observations, one stacked forward pass, (K, n_envs, n_actions)"""
         observations = np.stack([np.asarray(model._last_obs) for model in self.models])
-        with th.no_grad():
-            x = th.as_tensor(observations, device=self.device).float()
-            return self.stacked(x.reshape(*x.shape[:2], -1)).cpu().numpy()
+        x = th.as_tensor(observations, device=self.device).float()
+        return self.stacked.inference(x.reshape(*x.shape[:2], -1)).cpu().numpy()
 
     def step(self, updates: dict[int, "_MemberUpdate"]) -> list[int]:
         """
