@@ -266,12 +266,15 @@ def test_flushing_denormals_changes_no_normal_value() -> None:
     assert (th.tensor(1e-38) * 0.1).item() != 0.0
 
 
-def test_a_stacked_inference_is_its_forward_pass() -> None:
+def test_a_stacked_network_computes_its_members_networks() -> None:
     networks = [th.nn.Sequential(th.nn.Linear(3, 5), th.nn.Tanh(), th.nn.Linear(5, 2, bias=False)) for _ in range(3)]
     stacked = StackedMLP.from_sequentials(networks)
     x = th.randn(3, 4, 3)
-    assert th.equal(stacked.inference(x), stacked(x).detach())
-    assert not stacked.inference(x).requires_grad
+    outputs = stacked.inference(x)
+    assert not outputs.requires_grad
+    assert th.equal(outputs, stacked(x).detach())
+    for k, network in enumerate(networks):
+        th.testing.assert_close(outputs[k], network(x[k]).detach())
 
 
 def test_gradients_are_clipped_per_member() -> None:

@@ -158,17 +158,8 @@ class StackedMLP(nn.Module):
 
     def forward(self, x: th.Tensor) -> th.Tensor:
         """
-        :param x: the members' inputs, shape (K, B, in_features)
-        :return: every member's outputs, shape (K, B, out_features)
-        """
-        return self.layers(x)
-
-    @th.no_grad()
-    def inference(self, x: th.Tensor) -> th.Tensor:
-        """
-        ``forward`` without gradient, the layers called directly (``torch.baddbmm`` and each activation's ``forward``,
-        past ``nn.Module``'s call machinery and hooks, whose cost is most of a small network's forward pass): the same
-        outputs to the bit.
+        The layers are called directly (``torch.baddbmm`` and each activation's ``forward``), past ``nn.Module``'s call
+        machinery, whose cost is most of a small network's forward pass.
 
         :param x: the members' inputs, shape (K, B, in_features)
         :return: every member's outputs, shape (K, B, out_features)
@@ -179,6 +170,15 @@ class StackedMLP(nn.Module):
             else:
                 x = layer.forward(x)
         return x
+
+    @th.no_grad()
+    def inference(self, x: th.Tensor) -> th.Tensor:
+        """
+        :param x: the members' inputs, shape (K, B, in_features)
+        :return: ``forward`` without gradient (the action choice of a population at every env step), shape
+            (K, B, out_features)
+        """
+        return self.forward(x)
 
 
 def _linears(network: nn.Sequential) -> list[nn.Linear]:

@@ -563,9 +563,11 @@ class _LockstepTrainer:
             valid = th.as_tensor(np.arange(x.shape[1]) < sizes[:, None], device=device)
             counts = th.as_tensor(np.maximum(sizes, 1), dtype=losses.dtype, device=device)
             member_losses = th.where(valid, losses, 0.0).sum(dim=1) / counts
-        index = th.as_tensor(members, device=device)
         self.optimizer.zero_grad()
-        member_losses.index_select(0, index).sum().backward()
+        if len(members) == len(self.models):
+            member_losses.sum().backward()
+        else:
+            member_losses.index_select(0, th.as_tensor(members, device=device)).sum().backward()
         if self.max_grad_norm is not None and np.isfinite(self.max_grad_norm):
             clip_grad_norms_per_member(self.parameters, self.max_grad_norm)
         self.optimizer.step(members, learning_rates)
