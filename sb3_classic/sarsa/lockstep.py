@@ -311,9 +311,9 @@ class _Rollout:
             model._episodes_before_rollout = model._completed_episodes
             callback.on_rollout_start()
             self.running, self.n_steps, self.n_episodes = True, 0, 0
+        # (from the stacked forward pass's q̂: no forward pass of the member's own, nothing for autograd to record)
         model._next_q_values = q_values
-        with th.no_grad():
-            actions = model._sample_actions(model._last_obs)  # type: ignore[arg-type]
+        actions = model._sample_actions(model._last_obs)  # type: ignore[arg-type]
         env_actions = actions if model._action_offset is None else actions + model._action_offset
         new_obs, rewards, dones, infos = env.step(env_actions)
         dones = np.asarray(dones, dtype=bool)
