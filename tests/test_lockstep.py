@@ -7,6 +7,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import VecEnv
 
@@ -119,6 +120,48 @@ def test_member_trains_as_its_separate_run_in_every_mode(n_envs: int, kwargs: di
     assert len({model._completed_episodes for model in members}) > 1
 
 
+class Recorder(BaseCallback):
+    """What a callback sees of the rollout loop: its calls, the steps and the locals SB3's callbacks read."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.events: list[tuple[Any, ...]] = []
+
+    def _on_rollout_start(self) -> None:
+        self.events.append(("start", self.model.num_timesteps))
+
+    def _on_step(self) -> bool:
+        keys = ("n_steps", "actions", "rewards", "dones", "new_obs")
+        self.events.append(("step", self.n_calls, self.num_timesteps, *(np.array(self.locals[key]).tolist() for key in keys)))
+        self.events.append(("infos", [sorted(info) for info in self.locals["infos"]], self.locals["self"] is self.model))
+        return True
+
+    def _on_rollout_end(self) -> None:
+        self.events.append(("end", self.model.num_timesteps, self.locals["n_steps"]))
+
+
+def test_a_member_steps_its_envs_as_its_separate_run() -> None:
+    # The population's rollout step has collect_rollouts' effects: callbacks, Monitor, counts, ε
+    def make(seed: int) -> NStepSARSA:
+        env = make_vec_env("CartPole-v1", n_envs=2, seed=seed)
+        return NStepSARSA("MlpPolicy", env, seed=seed, **{**BATCH_SETTING, "train_freq": 3})
+
+    separate, recorders = [], [Recorder() for _ in range(2)]
+    for seed, recorder in zip((0, 1), recorders, strict=True):
+        model = make(seed)
+        model._action_rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(0,)))
+        separate.append(model.learn(120, callback=recorder))
+    members, own_recorders = [make(seed) for seed in (0, 1)], [Recorder() for _ in range(2)]
+    NStepSARSAPopulation(members).learn(120, callback=own_recorders)
+    for member, model, own, theirs in zip(members, separate, own_recorders, recorders, strict=True):
+        assert own.events == theirs.events
+        assert [(e["r"], e["l"]) for e in member.ep_info_buffer] == [(e["r"], e["l"]) for e in model.ep_info_buffer]
+        assert member.exploration_rate == model.exploration_rate
+        assert member._episodes_before_rollout == model._episodes_before_rollout
+        assert np.array_equal(member._last_obs, model._last_obs)  # type: ignore[arg-type]
+        assert np.array_equal(member._last_episode_starts, model._last_episode_starts)
+
+
 def test_a_population_repeats_itself_and_saves_ordinary_models(tmp_path: Path) -> None:
     runs = [NStepSARSAPopulation([make_member(seed) for seed in (3, 4)]).learn(60) for _ in range(2)]
     for first, second in zip(*runs, strict=True):
@@ -182,7 +225,8 @@ def test_members_with_nothing_to_train_are_not_stepped() -> None:
     x = th.randn(3, 4, 3)
     learning_rates = np.full(3, 1e-2)
     for step in range(5):
-        members = np.array([0, 2]) if step % 2 else np.array([0, 1, 2])
+        # (in any order: a population passes its members as their updates came)
+        members = np.array([2, 0]) if step % 2 else np.array([1, 0, 2])
         optimizer.zero_grad()
         stacked(x)[members].square().sum().backward()
         optimizer.step(members, learning_rates)
@@ -204,6 +248,33 @@ def test_members_with_nothing_to_train_are_not_stepped() -> None:
     assert list(optimizer.steps) == [6, 3, 5]
     assert all(th.equal(p.detach()[1], w) for p, w in zip(stacked.parameters(), weights, strict=True))
     assert all(th.equal(m[1], w) for m, w in zip(optimizer.exp_avgs, moments, strict=True))
+
+
+def test_flushing_denormals_changes_no_normal_value() -> None:
+    th.manual_seed(0)
+    parameters = [th.randn(3, 4, 5, requires_grad=True), th.randn(3, 1, 5, requires_grad=True)]
+    copies = [p.detach().clone().requires_grad_() for p in parameters]
+    optimizers = [StackedAdam(ps, 3, flush_denormal=flush) for ps, flush in ((parameters, True), (copies, False))]
+    for step in range(20):
+        grads = [th.randn_like(p) * (1e-3 if step % 2 else 1.0) for p in parameters]
+        for ps, optimizer in zip((parameters, copies), optimizers, strict=True):
+            for p, g in zip(ps, grads, strict=True):
+                p.grad = g.clone()
+            optimizer.step(np.array([0, 2]) if step % 3 else np.arange(3), np.full(3, 1e-2))
+    assert all(th.equal(p, q) for p, q in zip(parameters, copies, strict=True))
+    # (and off again after a step: torch's default)
+    assert (th.tensor(1e-38) * 0.1).item() != 0.0
+
+
+def test_a_stacked_network_computes_its_members_networks() -> None:
+    networks = [th.nn.Sequential(th.nn.Linear(3, 5), th.nn.Tanh(), th.nn.Linear(5, 2, bias=False)) for _ in range(3)]
+    stacked = StackedMLP.from_sequentials(networks)
+    x = th.randn(3, 4, 3)
+    outputs = stacked.inference(x)
+    assert not outputs.requires_grad
+    assert th.equal(outputs, stacked(x).detach())
+    for k, network in enumerate(networks):
+        th.testing.assert_close(outputs[k], network(x[k]).detach())
 
 
 def test_gradients_are_clipped_per_member() -> None:

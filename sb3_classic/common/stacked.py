@@ -158,10 +158,27 @@ class StackedMLP(nn.Module):
 
     def forward(self, x: th.Tensor) -> th.Tensor:
         """
+        The layers are called directly (``torch.baddbmm`` and each activation's ``forward``), past ``nn.Module``'s call
+        machinery, whose cost is most of a small network's forward pass.
+
         :param x: the members' inputs, shape (K, B, in_features)
         :return: every member's outputs, shape (K, B, out_features)
         """
-        return self.layers(x)
+        for layer in self.layers:
+            if isinstance(layer, StackedLinear):
+                x = th.bmm(x, layer.weight) if layer.bias is None else th.baddbmm(layer.bias, x, layer.weight)
+            else:
+                x = layer.forward(x)
+        return x
+
+    @th.no_grad()
+    def inference(self, x: th.Tensor) -> th.Tensor:
+        """
+        :param x: the members' inputs, shape (K, B, in_features)
+        :return: ``forward`` without gradient (the action choice of a population at every env step), shape
+            (K, B, out_features)
+        """
+        return self.forward(x)
 
 
 def _linears(network: nn.Sequential) -> list[nn.Linear]:
@@ -196,7 +213,11 @@ class StackedAdam:
     n-step SARSA's members at an episode's end train several transitions one after the other while the others train one
     or none. Here each member's slice of each stacked parameter is a tensor of its own (a view) with its own step count,
     and a step passes the slices of the members it moves to torch's functional ``torch.optim.adam.adam``: the
-    arithmetic is ``torch.optim.Adam``'s, fused or not as the members' optimizers are.
+    arithmetic is ``torch.optim.Adam``'s, fused or not as the members' optimizers are. A step of every member when
+    all have the same step count and learning rate (the members of a population whose updates keep in step) passes
+    the whole stacked tensors instead, with one step count each: the same elementwise arithmetic on the same values,
+    in one kernel call per parameter rather than K (torch's kernels cost a fixed overhead per tensor, which dominates
+    at the sizes of small networks).
 
     :param parameters: the stacked parameters, member first
     :param n_members: K
@@ -204,6 +225,11 @@ class StackedAdam:
     :param eps: ε
     :param fused: torch's fused kernel (the members' optimizers' ``fused``)
     :param foreach: torch's multi-tensor path (their ``foreach``)
+    :param flush_denormal: flush denormal numbers to zero during each step (``torch.set_flush_denormal``, on the CPUs
+        that support it; off again after the step, torch's default, as torch cannot read the setting): Adam's second
+        moments of weights whose gradients are rarely non-zero decay into the denormal range, where the CPU's
+        arithmetic is many times slower (the fused step of a small network's Adam then costs several times its normal
+        cost). The update changes only where a moment or weight below 1.2e-38 in magnitude is read or written as 0
     """
 
     def __init__(
@@ -214,8 +240,10 @@ class StackedAdam:
         eps: float = 1e-8,
         fused: bool | None = None,
         foreach: bool | None = None,
+        flush_denormal: bool = False,
     ) -> None:
         self.parameters = list(parameters)
+        self.flush_denormal = flush_denormal
         self.n_members = n_members
         self.beta1, self.beta2 = betas
         self.eps = eps
@@ -227,6 +255,10 @@ class StackedAdam:
         self._exp_avg_slices = [exp_avg.unbind(0) for exp_avg in self.exp_avgs]
         self._exp_avg_sq_slices = [exp_avg_sq.unbind(0) for exp_avg_sq in self.exp_avg_sqs]
         scalar = th.float32
+        # Every member's step count t; the slices' own counts (below) are brought up to date before a slice step
+        # whenever a whole-stack step moved them all
+        self._member_steps = np.zeros(n_members, dtype=np.int64)
+        self._slice_steps_stale = False
         self._steps = [
             [th.zeros((), dtype=scalar, device=parameter.device) for _ in range(n_members)] for parameter in self.parameters
         ]
@@ -234,12 +266,21 @@ class StackedAdam:
     @property
     def steps(self) -> np.ndarray:
         """Each member's step count t, shape (K,)."""
-        return np.array([int(step) for step in self._steps[0]], dtype=np.int64)
+        return self._member_steps.copy()
 
     def set_state(self, member: int, step: int) -> None:
         """:param member: k; :param step: its step count t (its moments are set in ``exp_avgs``/``exp_avg_sqs``)"""
+        self._sync_slice_steps()
+        self._member_steps[member] = step
         for steps in self._steps:
             steps[member].fill_(step)
+
+    def _sync_slice_steps(self) -> None:
+        if self._slice_steps_stale:
+            for steps in self._steps:
+                for member, step in enumerate(steps):
+                    step.fill_(int(self._member_steps[member]))
+            self._slice_steps_stale = False
 
     def zero_grad(self) -> None:
         """Drop the gradients (``set_to_none``, as torch's optimizers)."""
@@ -254,6 +295,22 @@ class StackedAdam:
         :param members: the members to step, shape (M,)
         :param learning_rates: every member's learning rate α, shape (K,)
         """
+        if not self.flush_denormal:
+            self._step(members, learning_rates)
+            return
+        th.set_flush_denormal(True)
+        try:
+            self._step(members, learning_rates)
+        finally:
+            th.set_flush_denormal(False)
+
+    def _step(self, members: np.ndarray, learning_rates: np.ndarray) -> None:
+        counts = self._member_steps[members]
+        if len(members) == self.n_members and (counts == counts[0]).all() and (learning_rates == learning_rates[0]).all():
+            self._step_whole_stack(int(counts[0]), float(learning_rates[0]))
+            return
+        self._sync_slice_steps()
+        self._member_steps[members] += 1
         grads = [
             (th.zeros_like(parameter) if parameter.grad is None else parameter.grad).unbind(0) for parameter in self.parameters
         ]
@@ -277,3 +334,27 @@ class StackedAdam:
                 eps=self.eps,
                 maximize=False,
             )
+
+    def _step_whole_stack(self, step: int, learning_rate: float) -> None:
+        """A step of every member, all at step count ``step`` with one learning rate: torch's ``adam`` on the stacks."""
+        device = self.parameters[0].device
+        adam(
+            [parameter.data for parameter in self.parameters],
+            [th.zeros_like(parameter) if parameter.grad is None else parameter.grad for parameter in self.parameters],
+            self.exp_avgs,
+            self.exp_avg_sqs,
+            [],
+            # (one count per tensor: torch's adam increments each of them)
+            [th.tensor(float(step), dtype=th.float32, device=device) for _ in self.parameters],
+            foreach=self.foreach,
+            fused=self.fused,
+            amsgrad=False,
+            beta1=self.beta1,
+            beta2=self.beta2,
+            lr=learning_rate,
+            weight_decay=0.0,
+            eps=self.eps,
+            maximize=False,
+        )
+        self._member_steps += 1
+        self._slice_steps_stale = True

@@ -13,7 +13,8 @@ from stable_baselines3.common.type_aliases import MaybeCallback
 from stable_baselines3.dqn.policies import QNetwork
 from torch import nn
 
-from sb3_classic.common.buffers import TrainingBatch
+from sb3_classic.common.buffers import TrainingBatch, all_finite
+from sb3_classic.common.env_checks import raise_non_finite
 from sb3_classic.common.stacked import StackedAdam, StackedMLP, clip_grad_norms_per_member
 from sb3_classic.common.utils import check_positive_int
 from sb3_classic.sarsa.nstep_sarsa import LOG_EVERY_STEPS, NStepSARSA
@@ -158,39 +159,22 @@ class NStepSARSAPopulation:
                 # would hold a stale Adam state, so saving waits until learn returns
                 model.__dict__["save"] = _refuse_save
             # A member's update trains its transitions one stacked step at a time, while the others go on with their
-            # env steps and updates: each member makes the updates of its separate run in the same order, and a
-            # stacked step trains every member that has a transition to train
+            # env steps and updates: each member makes the updates of its separate run in the same order. Between two
+            # stacked steps, every member without an update in progress takes env steps (one stacked forward pass
+            # for all of them per env step) until its next update has something to train: at an episode's start a
+            # member takes its first n - 1 steps without waiting for the others' gradient steps, as its weights do not
+            # change before its next update
             updates: dict[int, _MemberUpdate] = {}
+            rollouts = [_Rollout(model, member_callbacks[k]) for k, model in enumerate(models)]
             while True:
                 ready = [
                     k
                     for k, model in enumerate(models)
-                    if k not in stopped and k not in updates and model.num_timesteps < totals[k]
+                    if k not in stopped and k not in updates and (rollouts[k].running or model.num_timesteps < totals[k])
                 ]
                 if not ready and not updates:
                     break
-                q_values = trainer.q_values() if ready else None
-                for k in ready:
-                    model = models[k]
-                    model._next_q_values = None if q_values is None else q_values[k]
-                    try:
-                        go_on = model.collect_rollouts(model.env, member_callbacks[k], model.rollout_buffer)  # type: ignore[arg-type]
-                    except ValueError as error:
-                        errors[k] = error
-                        stopped.add(k)
-                        continue
-                    finally:
-                        model._next_q_values = None
-                    if not go_on:
-                        stopped.add(k)
-                        continue
-                    iterations[k] += 1
-                    model._update_current_progress_remaining(model.num_timesteps, totals[k])
-                    batch = model._start_update()
-                    if batch is None:
-                        _dump(model, iterations[k], log_interval)
-                    else:
-                        updates[k] = _MemberUpdate(batch, model._update_slices(len(batch.targets)), model.gradient_steps)
+                _env_steps(ready, rollouts, trainer, updates, totals, iterations, errors, stopped, log_interval)
                 for k in trainer.step(updates):
                     update = updates.pop(k)
                     models[k]._finish_update(update.batch, update.n_chunks, update.q_first, update.losses)
@@ -215,6 +199,60 @@ class MemberError(ValueError):
     def __init__(self, message: str, member_errors: dict[int, ValueError]) -> None:
         super().__init__(message)
         self.member_errors = member_errors
+
+
+def _env_steps(
+    ready: list[int],
+    rollouts: list["_Rollout"],
+    trainer: "_LockstepTrainer",
+    updates: dict[int, "_MemberUpdate"],
+    totals: list[int],
+    iterations: list[int],
+    errors: dict[int, ValueError],
+    stopped: set[int],
+    log_interval: int | None,
+) -> None:
+    """
+    The env steps between two stacked gradient steps: each member of ``ready`` steps its envs (one stacked forward pass
+    chooses the actions of all, at each env step) until its rollout ends in an update with transitions to train
+    (``updates``), its ``learn`` ends, or it stops (``stopped``; ``errors`` for a non-finite value).
+
+    :param ready: the members free to step (no update in progress, and a rollout under way or env steps left)
+    :param rollouts: every member's rollout loop
+    :param trainer: the stacked q̂
+    :param updates: the updates in progress, by member: those started here are added
+    :param totals: every member's env steps to train for
+    :param iterations: every member's rollouts so far (counted here)
+    :param errors: the members' errors, by member
+    :param stopped: the members stopped
+    :param log_interval: ``learn``'s
+    """
+    while ready:
+        q_values = trainer.q_values()
+        stepping, ready = ready, []
+        for k in stepping:
+            model = rollouts[k].model
+            try:
+                complete = rollouts[k].step(q_values[k])
+            except ValueError as error:
+                errors[k] = error
+                stopped.add(k)
+                continue
+            if complete is None:  # (the callback stopped training)
+                stopped.add(k)
+                continue
+            if not complete:
+                ready.append(k)
+                continue
+            iterations[k] += 1
+            model._update_current_progress_remaining(model.num_timesteps, totals[k])
+            batch = model._start_update()
+            if batch is not None:
+                updates[k] = _MemberUpdate(batch, model._update_slices(len(batch.targets)), model.gradient_steps)
+                continue
+            _dump(model, iterations[k], log_interval)
+            if model.num_timesteps < totals[k]:
+                ready.append(k)
 
 
 def _refuse_save(*args: Any, **kwargs: Any) -> None:
@@ -250,6 +288,96 @@ def _finish_learn(
             f"to the end); member {first}'s error: {errors[first]}",
             errors,
         ) from errors[first]
+
+
+class _Rollout:
+    """
+    A member's rollout loop (``ClassicOnPolicyAlgorithm.collect_rollouts``), one env step at a time, so that the
+    population can choose every member's action from one stacked forward pass: the same effects on the member (its
+    behaviour policy's draws, its env and Monitor, ``num_timesteps``, its callback's ``on_rollout_start``, ``on_step``
+    with the rollout loop's locals and ``on_rollout_end``, the checks for NaN and ±inf, the buffer, the episode counts
+    and ε), without masks (the population reads none).
+
+    :param model: the member
+    :param callback: its callback, as ``_setup_learn`` made it
+    """
+
+    def __init__(self, model: NStepSARSA, callback: BaseCallback) -> None:
+        self.model = model
+        self.callback = callback
+        assert model.env is not None
+        self.env = model.env
+        #: whether a rollout is under way, and its env steps (per env) and episodes so far
+        self.running = False
+        self.n_steps = self.n_episodes = 0
+
+    def step(self, q_values: np.ndarray) -> bool | None:
+        """
+        One env step of the member's rollout (its start first, if none is under way), and its end if it is complete.
+
+        :param q_values: q̂(S, ·) of the member's current observations, shape (n_envs, n_actions)
+        :return: whether the rollout is complete (the update's turn); None if the callback stopped training
+        :raises ValueError: the member's own error for a non-finite reward or observation
+        """
+        model, callback, env, buffer = self.model, self.callback, self.env, self.model.rollout_buffer
+        if not self.running:
+            model.policy.set_training_mode(False)
+            model._episodes_before_rollout = model._completed_episodes
+            callback.on_rollout_start()
+            self.running, self.n_steps, self.n_episodes = True, 0, 0
+        # (from the stacked forward pass's q̂: no forward pass of the member's own, nothing for autograd to record)
+        model._next_q_values = q_values
+        actions = model._sample_actions(model._last_obs)  # type: ignore[arg-type]
+        env_actions = actions if model._action_offset is None else actions + model._action_offset
+        new_obs, rewards, dones, infos = env.step(env_actions)
+        dones = np.asarray(dones, dtype=bool)
+        model.num_timesteps += env.num_envs
+        self.n_steps += 1
+        # The callback runs before the step is stored, with the rollout loop's locals, as in collect_rollouts
+        callback.update_locals(
+            dict(
+                self=model,
+                env=env,
+                callback=callback,
+                rollout_buffer=buffer,
+                n_rollout_steps=None,
+                n_steps=self.n_steps,
+                n_episodes=self.n_episodes,
+                use_masking=False,
+                action_masks=None,
+                final_action_masks=None,
+                actions=actions,
+                env_actions=env_actions,
+                new_obs=new_obs,
+                rewards=rewards,
+                dones=dones,
+                infos=infos,
+            )
+        )
+        continue_training = callback.on_step()
+        if not (np.isfinite(rewards).all() and all_finite(new_obs)):  # type: ignore[arg-type]
+            self.running = False
+            if not np.isfinite(rewards).all():
+                raise_non_finite(model, buffer.episode_length, rewards, "reward")
+            raise_non_finite(model, buffer.episode_length, new_obs, "observation", after_reset=dones)  # type: ignore[arg-type]
+        ends, truncated, final_observations = model._episode_ends(new_obs, dones, infos)  # type: ignore[arg-type]
+        buffer.add(model._last_obs, actions, rewards, ends, truncated, final_observations)  # type: ignore[arg-type]
+        model._last_obs = new_obs  # type: ignore[assignment]
+        model._last_episode_starts = ends
+        model._update_info_buffer(infos, dones)
+        if ends.any():
+            n_ended = int(ends.sum())
+            self.n_episodes += n_ended
+            model._on_episodes_end(n_ended)
+        if not continue_training:
+            self.running = False
+            return None
+        if not model._rollout_complete(self.n_steps, self.n_episodes):
+            return False
+        callback.update_locals(dict(n_steps=self.n_steps, n_episodes=self.n_episodes))
+        callback.on_rollout_end()
+        self.running = False
+        return True
 
 
 class _MemberUpdate:
@@ -336,6 +464,8 @@ class _LockstepTrainer:
             eps=group["eps"],
             fused=group["fused"],
             foreach=group["foreach"],
+            # (the members' separate runs spend most of their Adam steps' time on denormal second moments)
+            flush_denormal=True,
         )
         self._load_adam_states()
         #: the length of a flattened observation
@@ -366,9 +496,8 @@ class _LockstepTrainer:
     def q_values(self) -> np.ndarray:
         """:return: q̂(S, ·) of every member's current observations, one stacked forward pass, (K, n_envs, n_actions)"""
         observations = np.stack([np.asarray(model._last_obs) for model in self.models])
-        with th.no_grad():
-            x = th.as_tensor(observations, device=self.device).float()
-            return self.stacked(x.reshape(*x.shape[:2], -1)).cpu().numpy()
+        x = th.as_tensor(observations, device=self.device).float()
+        return self.stacked.inference(x.reshape(*x.shape[:2], -1)).cpu().numpy()
 
     def step(self, updates: dict[int, "_MemberUpdate"]) -> list[int]:
         """
@@ -448,9 +577,11 @@ class _LockstepTrainer:
             valid = th.as_tensor(np.arange(x.shape[1]) < sizes[:, None], device=device)
             counts = th.as_tensor(np.maximum(sizes, 1), dtype=losses.dtype, device=device)
             member_losses = th.where(valid, losses, 0.0).sum(dim=1) / counts
-        index = th.as_tensor(members, device=device)
         self.optimizer.zero_grad()
-        member_losses.index_select(0, index).sum().backward()
+        if len(members) == len(self.models):
+            member_losses.sum().backward()
+        else:
+            member_losses.index_select(0, th.as_tensor(members, device=device)).sum().backward()
         if self.max_grad_norm is not None and np.isfinite(self.max_grad_norm):
             clip_grad_norms_per_member(self.parameters, self.max_grad_norm)
         self.optimizer.step(members, learning_rates)
