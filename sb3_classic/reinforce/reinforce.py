@@ -388,7 +388,14 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             steps.append(
                 self._gradient_step(chunk_observations, actions[chunk], returns[chunk], episode_steps[chunk], chunk_masks)  # type: ignore[arg-type]
             )
-        self._finish_update(batch, steps)
+        values = th.cat([step["values"] for step in steps]) if self.use_baseline else None
+        self._finish_update(
+            batch,
+            th.stack([step["policy_loss"] for step in steps]),
+            th.stack([step["entropy_loss"] for step in steps]),
+            th.stack([step["value_loss"] for step in steps]),
+            values,
+        )
 
     def _start_update(self) -> TrainingBatch | None:
         """
@@ -404,23 +411,32 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         self._update_learning_rates(schedules)
         return self._training_batch()
 
-    def _finish_update(self, batch: TrainingBatch, steps: Sequence[dict[str, th.Tensor]]) -> None:
+    def _finish_update(
+        self,
+        batch: TrainingBatch,
+        policy_losses: th.Tensor,
+        entropy_losses: th.Tensor,
+        value_losses: th.Tensor,
+        values: th.Tensor | None,
+    ) -> None:
         """
         The second half of ``train``, after its gradient steps: the steps marked trained, the counts and the log.
 
         :param batch: the update's steps (``_start_update``'s)
-        :param steps: what each gradient step returned (``_gradient_step``'s losses and v̂(S_t)), in order
+        :param policy_losses: each gradient step's policy loss, shape (n_gradient_steps,)
+        :param entropy_losses: each gradient step's entropy loss, shape (n_gradient_steps,)
+        :param value_losses: each gradient step's value loss, shape (n_gradient_steps,)
+        :param values: v̂(S_t, w) of the batch's steps before their gradient steps, shape (B,); None without a baseline
         """
         self.rollout_buffer.mark_trained(batch.n_trained)
-        self._n_updates += len(steps)
+        self._n_updates += len(policy_losses)
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         # Every episode in the buffer is held from its first step (t = 0)
         self.logger.record("train/n_episodes", int((batch.episode_steps == 0).sum()))
-        self.logger.record("train/policy_loss", th.stack([step["policy_loss"] for step in steps]).mean().item())
-        self.logger.record("train/entropy_loss", th.stack([step["entropy_loss"] for step in steps]).mean().item())
-        if self.use_baseline:
-            values = th.cat([step["values"] for step in steps])
-            self.logger.record("train/value_loss", th.stack([step["value_loss"] for step in steps]).mean().item())
+        self.logger.record("train/policy_loss", policy_losses.mean().item())
+        self.logger.record("train/entropy_loss", entropy_losses.mean().item())
+        if values is not None:
+            self.logger.record("train/value_loss", value_losses.mean().item())
             self.logger.record("train/explained_variance", explained_variance(values.cpu().numpy(), batch.targets))
         if hasattr(self.policy, "log_std"):
             self.logger.record("train/std", th.exp(self.policy.log_std).mean().item())
