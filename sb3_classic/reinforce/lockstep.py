@@ -627,11 +627,6 @@ def _check_member(k: int, model: REINFORCE) -> None:
         )
     policy = model.policy
     extractors = {policy.pi_features_extractor, policy.vf_features_extractor}
-    if type(policy) is not REINFORCEPolicy or policy._own_forward or not policy._sb3_distribution:
-        raise TypeError(
-            f"{name}: policy {type(policy).__name__} with its own forward, distribution or layers: a population stacks "
-            "REINFORCEPolicy's ('MlpPolicy') networks; train this one alone (model.learn)"
-        )
     if any(type(extractor) is not FlattenExtractor for extractor in extractors) or is_image_space(model.observation_space):
         names = sorted({type(extractor).__name__ for extractor in extractors})
         raise TypeError(
@@ -639,8 +634,17 @@ def _check_member(k: int, model: REINFORCE) -> None:
             "flat Box observations ('MlpPolicy'); train CNN and Dict (MultiInputPolicy) models one after the other "
             "(model.learn)"
         )
-    optimizers = {"optimizer": policy.optimizer, "value_optimizer": policy.value_optimizer}
+    if type(policy) is not REINFORCEPolicy or policy._own_forward or not policy._sb3_distribution:
+        raise TypeError(
+            f"{name}: policy {type(policy).__name__} with its own forward, distribution or layers: a population stacks "
+            "REINFORCEPolicy's ('MlpPolicy') networks; train this one alone (model.learn)"
+        )
     networks = {"optimizer": _policy_network(policy), "value_optimizer": _value_network(policy)}
+    # (raises for layers a stacked network does not hold)
+    StackedMLP.from_sequentials([networks["optimizer"]], f"{name}'s π")
+    if model.use_baseline:
+        StackedMLP.from_sequentials([networks["value_optimizer"]], f"{name}'s v̂")
+    optimizers = {"optimizer": policy.optimizer, "value_optimizer": policy.value_optimizer}
     for key, optimizer in optimizers.items():
         if optimizer is None:
             continue
