@@ -18,7 +18,7 @@ from sb3_classic.common.masking import is_masking_supported
 from sb3_classic.common.stacked import StackedAdam, StackedMLP, clip_grad_norms_per_member
 from sb3_classic.common.utils import check_positive_int
 from sb3_classic.reinforce.policies import REINFORCEPolicy
-from sb3_classic.reinforce.reinforce import REINFORCE
+from sb3_classic.reinforce.reinforce import REINFORCE, softmax_cdf
 
 #: What the members of a population share: every argument but ``seed`` and ``env`` (and the env's shape)
 SHARED_SETTINGS = (
@@ -76,13 +76,13 @@ class REINFORCEPopulation:
     their own again and its two optimizers the Adam states of its slices: the members are K ordinary models that
     save, load, predict and ``learn`` on their own as any other.
 
-    The actions of member k are drawn from its logits by the inverse CDF of their soft-max (one uniform draw per env
-    and step, ``categorical_inverse_cdf``) with a NumPy generator of its own,
-    ``np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(0,)))``, kept by the population across ``learn``
-    calls, not with torch's global generator that a separate run draws from: member k's draws do not depend on the
-    other members, and a population of the same seeds repeats itself to the bit on the CPU. A separate run with the
-    same seed sees the same transitions only where it draws the same (``model._action_rng`` set to that generator,
-    as the tests do).
+    The actions of member k are drawn from its logits by the inverse CDF of their soft-max (``categorical_inverse_cdf``:
+    the soft-max of every member at once, then one uniform draw per env and step for each member) with a NumPy
+    generator of its own, ``np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(0,)))``, kept by the
+    population across ``learn`` calls, not with torch's global generator that a separate run draws from: member k's
+    draws do not depend on the other members, and a population of the same seeds repeats itself to the bit on the
+    CPU. A separate run with the same seed sees the same transitions only where it draws the same
+    (``model._action_rng`` set to that generator, as the tests do).
 
     Covered: both update modes, ``use_baseline`` True and False, ``n_episodes``, ``normalize_advantage``,
     ``gamma_t_factor``, ``ent_coef``, ``max_grad_norm``, schedules and decays, several envs per member, Discrete
@@ -155,7 +155,7 @@ class REINFORCEPopulation:
             run.trainer.close()
             for model in models:
                 model._action_rng = None
-                model._next_logits = None
+                model._next_cdf = None
                 model.__dict__.pop("save", None)
         _finish_learn(models, member_callbacks, run.iterations, run.errors, log_interval)
         return models
@@ -193,9 +193,9 @@ class _LockstepRun:
             if not stepping and not self.updates:
                 return
             if stepping:
-                logits = self.trainer.logits()
+                cdf = softmax_cdf(self.trainer.logits())
                 for k in stepping:
-                    self._step(k, logits[k])
+                    self._step(k, cdf[k])
             for k in self.trainer.step(self.updates):
                 self.updates.pop(k).finish(self.models[k])
                 _dump(self.models[k], self.iterations[k], self.log_interval)
@@ -214,18 +214,18 @@ class _LockstepRun:
             stepping.append(k)
         return stepping
 
-    def _step(self, k: int, logits: np.ndarray) -> None:
+    def _step(self, k: int, cdf: np.ndarray) -> None:
         """
         Member k's env step, and the end of its rollout and the start of its update when the rollout is complete
         (``REINFORCE.learn``'s loop after ``collect_rollouts``).
 
         :param k: the member
-        :param logits: its logits, shape (n_envs, n_actions)
+        :param cdf: its cumulative probabilities (``softmax_cdf``), shape (n_envs, n_actions)
         """
         model, rollout = self.models[k], self.rollouts[k]
         assert rollout is not None
         try:
-            go_on = _env_step(model, self.callbacks[k], rollout, logits)
+            go_on = _env_step(model, self.callbacks[k], rollout, cdf)
         except ValueError as error:
             self.errors[k] = error
             self.stopped.add(k)
@@ -246,23 +246,23 @@ class _LockstepRun:
             self.updates[k] = _MemberUpdate(model, batch)
 
 
-def _env_step(model: REINFORCE, callback: BaseCallback, rollout: list[int], logits: np.ndarray) -> bool:
+def _env_step(model: REINFORCE, callback: BaseCallback, rollout: list[int], cdf: np.ndarray) -> bool:
     """
     One env step of a member's rollout (``collect_rollouts``'s loop), its actions drawn from the stacked forward
-    pass's logits.
+    pass's probabilities.
 
     :param model: the member
     :param callback: its callback
     :param rollout: its rollout's steps and episodes so far, counted on here
-    :param logits: its logits h(S, ·, θ), shape (n_envs, n_actions)
+    :param cdf: its cumulative probabilities (``softmax_cdf``), shape (n_envs, n_actions)
     :return: False if its callback stopped training
     :raises ValueError: if its env returned NaN or ±inf
     """
-    model._next_logits = logits
+    model._next_cdf = cdf
     try:
         go_on, n_ended = model._rollout_step(model.env, callback, model.rollout_buffer, rollout[0], rollout[1])  # type: ignore[arg-type]
     finally:
-        model._next_logits = None
+        model._next_cdf = None
     rollout[0] += 1
     rollout[1] += n_ended
     return go_on

@@ -18,22 +18,36 @@ from sb3_classic.reinforce.policies import CnnPolicy, MlpPolicy, MultiInputPolic
 SelfREINFORCE = TypeVar("SelfREINFORCE", bound="REINFORCE")
 
 
-def categorical_inverse_cdf(logits: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def softmax_cdf(logits: np.ndarray) -> np.ndarray:
     """
-    A ~ π(·|s) for each row of logits by the inverse CDF: π = soft-max of the logits (S&B eq. 13.2), in float64, and
-    the first action whose cumulative probability exceeds one uniform draw u ~ U[0, 1) of ``rng`` (scaled by the
-    total, so that rounding leaves no gap at the top).
+    :param logits: action preferences h(s, ·, θ), shape (..., n_actions)
+    :return: the cumulative probabilities of their soft-max π(·|s) (S&B eq. 13.2), unnormalised (the last one is the
+        normaliser Σ_a e^{h(s, a) − max_b h(s, b)}), float64, the same shape
+    """
+    logits = np.asarray(logits, dtype=np.float64)
+    return np.cumsum(np.exp(logits - logits.max(axis=-1, keepdims=True)), axis=-1)
 
-    :param logits: the action preferences h(s, ·, θ), shape (B, n_actions)
+
+def draw_from_cdf(cdf: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """
+    A ~ π(·|s) for each row by the inverse CDF: the first action whose cumulative probability exceeds one uniform draw
+    u ~ U[0, 1) of ``rng`` scaled by the row's total (so that rounding leaves no gap at the top).
+
+    :param cdf: ``softmax_cdf``'s, shape (B, n_actions)
     :param rng: the generator of the draws (one ``rng.random(B)`` call)
     :return: the action indices, shape (B,), int64
     """
-    logits = np.asarray(logits, dtype=np.float64)
-    probabilities = np.exp(logits - logits.max(axis=-1, keepdims=True))
-    cdf = np.cumsum(probabilities, axis=-1)
     u = rng.random(len(cdf)) * cdf[:, -1]
-    actions = (cdf <= u[:, None]).sum(axis=-1)
-    return np.minimum(actions, cdf.shape[-1] - 1).astype(np.int64)
+    return np.minimum((cdf <= u[:, None]).sum(axis=-1), cdf.shape[-1] - 1)
+
+
+def categorical_inverse_cdf(logits: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """
+    :param logits: the action preferences h(s, ·, θ), shape (B, n_actions)
+    :param rng: the generator of the draws (one ``rng.random(B)`` call)
+    :return: A ~ π(·|s) of each row (``draw_from_cdf`` of ``softmax_cdf``), shape (B,), int64
+    """
+    return draw_from_cdf(softmax_cdf(logits), rng)
 
 
 class REINFORCE(ClassicOnPolicyAlgorithm):
@@ -192,9 +206,10 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         self.ent_coef = ent_coef
         # The generator of the rollouts' action draws; None: torch's global one (``multinomial``), seeded by SB3
         self._action_rng: np.random.Generator | None = None
-        # π's logits of the current observations computed outside the model (a population's stacked forward pass,
-        # reinforce/lockstep.py), taken by the next _sample_actions in place of a forward pass of its own
-        self._next_logits: np.ndarray | None = None
+        # π's cumulative probabilities (softmax_cdf) of the current observations computed outside the model (from a
+        # population's stacked forward pass, reinforce/lockstep.py), taken by the next _sample_actions in place of a
+        # forward pass of its own
+        self._next_cdf: np.ndarray | None = None
         if _init_setup_model:
             self._setup_model()  # (which checks the arguments first)
 
@@ -239,8 +254,8 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
     def _draw_actions(self, obs: np.ndarray | dict[str, np.ndarray], action_masks: np.ndarray | None) -> np.ndarray:
         """
         ``_sample_actions`` with ``_action_rng`` set: A ~ π(·|S, θ) by the inverse CDF of the soft-max of the logits
-        (``categorical_inverse_cdf``), one uniform draw of ``_action_rng`` per env. The logits are those the
-        population computed (``_next_logits``, taken once) or the policy's forward pass.
+        (``categorical_inverse_cdf``), one uniform draw of ``_action_rng`` per env. The cumulative probabilities are
+        those the population computed (``_next_cdf``, taken once) or those of the policy's forward pass.
 
         :param obs: the current observations of all envs
         :param action_masks: must be None or allow every action (the draw is over all actions)
@@ -257,13 +272,13 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             raise ValueError(
                 "_action_rng draws over all actions, without masks: set model._action_rng = None, or learn(use_masking=False)"
             )
-        logits = self._next_logits
-        if logits is None:
-            logits = self.policy.action_logits(obs_as_tensor(obs, self.device)).cpu().numpy()
+        cdf = self._next_cdf
+        if cdf is None:
+            cdf = softmax_cdf(self.policy.action_logits(obs_as_tensor(obs, self.device)).cpu().numpy())
         else:
-            self._next_logits = None
+            self._next_cdf = None
         assert self._action_rng is not None
-        return categorical_inverse_cdf(logits, self._action_rng)
+        return draw_from_cdf(cdf, self._action_rng)
 
     def _rollout_complete(self, n_steps: int, n_episodes: int) -> bool:
         return n_episodes >= self.n_episodes
@@ -500,8 +515,8 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         return self.policy.predict(observation, state, episode_start, deterministic, action_masks=action_masks)
 
     def _excluded_save_params(self) -> list[str]:
-        # A population's generator and logits (they are the population's): not training state
-        return [*super()._excluded_save_params(), "_action_rng", "_next_logits"]
+        # A population's generator and probabilities (they are the population's): not training state
+        return [*super()._excluded_save_params(), "_action_rng", "_next_cdf"]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         optimizers = ["policy.optimizer"] + (["policy.value_optimizer"] if self.use_baseline else [])
