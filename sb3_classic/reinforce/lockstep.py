@@ -454,13 +454,16 @@ class _LockstepTrainer:
         self.gamma, self.gamma_t_factor = first.gamma, first.gamma_t_factor
         self.normalize_advantage, self.ent_coef = first.normalize_advantage, first.ent_coef
         self._all = th.arange(len(models), device=self.device)
+        #: every member's current observations, flattened, refilled at each env step (one array, no stacking)
+        self._observations = np.zeros((len(models), first.n_envs, self.features), dtype=np.float32)
 
     def logits(self) -> np.ndarray:
         """:return: h(S, ·, θ) of every member's current observations, one stacked forward pass, (K, n_envs, n_actions)"""
-        observations = np.stack([np.asarray(model._last_obs) for model in self.models])
+        observations = self._observations
+        for k, model in enumerate(self.models):
+            observations[k] = np.reshape(model._last_obs, observations.shape[1:])  # type: ignore[arg-type]
         with th.no_grad():
-            x = th.as_tensor(observations, device=self.device).float()
-            return self.policy.stacked(x.reshape(*x.shape[:2], -1)).cpu().numpy()
+            return self.policy.stacked(th.as_tensor(observations, device=self.device)).cpu().numpy()
 
     def step(self, updates: dict[int, _MemberUpdate]) -> list[int]:
         """

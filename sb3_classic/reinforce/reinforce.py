@@ -37,8 +37,9 @@ def draw_from_cdf(cdf: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     :param rng: the generator of the draws (one ``rng.random(B)`` call)
     :return: the action indices, shape (B,), int64
     """
-    u = rng.random(len(cdf)) * cdf[:, -1]
-    return np.minimum((cdf <= u[:, None]).sum(axis=-1), cdf.shape[-1] - 1)
+    u = rng.random((len(cdf), 1)) * cdf[:, -1:]
+    # (the count over all but the last action: at most the last index, even where rounding puts u at the total)
+    return (cdf[:, :-1] <= u).sum(axis=-1)
 
 
 def categorical_inverse_cdf(logits: np.ndarray, rng: np.random.Generator) -> np.ndarray:
