@@ -183,8 +183,9 @@ def main(argv: list[str] | None = None) -> None:
     (args.out / "lockstep.md").write_text(
         f"""# K seeds in lockstep against one after the other
 
-NStepSARSA, {SETTING} (n_steps 10 on CartPole-v1, 5 on Acrobot-v1); REINFORCE, the CartPole-v1 and Acrobot-v1
-entries of hyperparams/reinforce.yml (update_mode batch) and the seed report's per-step final model on CartPole-v1.
+NStepSARSA, {SETTING} (n_steps 10 on CartPole-v1, 5 on Acrobot-v1).
+REINFORCE, the CartPole-v1 and Acrobot-v1 entries of hyperparams/reinforce.yml (update_mode batch) and the seed
+report's per-step final model on CartPole-v1 (studies/seed_report/fig08-reinforce-cartpole-final.yml).
 CPU seconds (`time.process_time`) of training only, one process, one PyTorch thread (OMP_NUM_THREADS={threads}).
 
     {command.strip()}
@@ -197,9 +198,14 @@ measured), Python {platform.python_version()}, torch {th.__version__}.
 {table}
 
 Where NStepSARSA's time goes (cProfile of 10 CartPole-v1 members, 1,500 env steps each): about half in the stacked
-gradient steps, 1.4 per env step (at an episode's end a member trains its last n transitions one per step before its next env
-step, so the members finish at different times), and half in each member's own Python work per env step (its env and
-VecEnv, the rollout loop's bookkeeping, its windows and targets), which lockstep does not share.
+gradient steps, 1.4 per env step (at an episode's end a member trains its last n transitions one per step before its
+next env step, so the members finish at different times), and half in each member's own Python work per env step (its
+env and VecEnv, the rollout loop's bookkeeping, its windows and targets), which lockstep does not share.
+
+REINFORCE's batch mode shares the forward pass of the rollouts; its updates, one per episode and member, seldom fall
+on the same env step, so most stacked gradient steps train one member, and each member's own work per env step (its
+env and VecEnv, the rollout loop's bookkeeping) is most of the time. The per-step mode trains an episode's T steps one
+stacked gradient step at a time while the other members go on with theirs, and shares those steps too.
 """
     )
 
