@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch as th
 from sb3_contrib.common.wrappers import ActionMasker
-from stable_baselines3.common.callbacks import CheckpointCallback
+from stable_baselines3.common.callbacks import CheckpointCallback, StopTrainingOnMaxEpisodes
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.envs import FakeImageEnv, SimpleMultiObsEnv
 from stable_baselines3.common.vec_env import VecEnv
@@ -222,3 +222,34 @@ def test_a_model_once_and_a_callback_per_member() -> None:
         REINFORCEPopulation([model, model])
     with pytest.raises(ValueError, match="1 callbacks for 2 members"):
         REINFORCEPopulation([make_member(0), make_member(1)]).learn(10, callback=[None])
+
+
+@pytest.mark.parametrize("update_mode", ["batch", "per_step"])
+def test_a_second_learn_goes_on_as_the_separate_run_does(update_mode: str) -> None:
+    # The members' Adam states and generators carry over from one learn() call to the next
+    separate = []
+    for seed in (0, 1):
+        model = make_member(seed, update_mode=update_mode)
+        model._action_rng = member_rng(seed)
+        model.learn(150)
+        separate.append(model.learn(150, reset_num_timesteps=False))
+    members = [make_member(seed, update_mode=update_mode) for seed in (0, 1)]
+    population = REINFORCEPopulation(members)
+    population.learn(150)
+    population.learn(150, reset_num_timesteps=False)
+    for member, model in zip(members, separate, strict=True):
+        assert member.num_timesteps == model.num_timesteps > 300
+        assert member._n_updates == model._n_updates
+        assert max_difference(member, model) < 1e-5
+        assert_same_adam_states(member, model)
+
+
+def test_a_callback_stops_its_member_only() -> None:
+    separate = make_member(0)
+    separate._action_rng = member_rng(0)
+    separate.learn(1000, callback=StopTrainingOnMaxEpisodes(5))
+    members = [make_member(0), make_member(1)]
+    REINFORCEPopulation(members).learn(1000, callback=[StopTrainingOnMaxEpisodes(5), None])
+    assert members[0].num_timesteps == separate.num_timesteps < 1000 <= members[1].num_timesteps
+    assert members[0]._n_updates == separate._n_updates
+    assert max_difference(members[0], separate) < 1e-5
