@@ -34,7 +34,7 @@ def draw_from_cdf(cdf: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     u ~ U[0, 1) of ``rng`` scaled by the row's total (so that rounding leaves no gap at the top).
 
     :param cdf: ``softmax_cdf``'s, shape (B, n_actions)
-    :param rng: the generator of the draws (one ``rng.random(B)`` call)
+    :param rng: the generator of the draws (one ``rng.random((B, 1))`` call: B draws, in row order)
     :return: the action indices, shape (B,), int64
     """
     u = rng.random((len(cdf), 1)) * cdf[:, -1:]
@@ -45,7 +45,7 @@ def draw_from_cdf(cdf: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 def categorical_inverse_cdf(logits: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """
     :param logits: the action preferences h(s, ·, θ), shape (B, n_actions)
-    :param rng: the generator of the draws (one ``rng.random(B)`` call)
+    :param rng: the generator of the draws (B draws, in row order)
     :return: A ~ π(·|s) of each row (``draw_from_cdf`` of ``softmax_cdf``), shape (B,), int64
     """
     return draw_from_cdf(softmax_cdf(logits), rng)
