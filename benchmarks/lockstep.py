@@ -1,14 +1,18 @@
 """
-CPU seconds of K seeds of one NStepSARSA setting trained in lockstep (``NStepSARSAPopulation``) against the same K
-seeds trained one after the other (``model.learn``), in one process with one PyTorch thread. Two families of settings
-(``--settings``): ``per_step``, the book's per-step mode (2 × 128 MLP, n_steps 10 on CartPole-v1 and 5 on Acrobot-v1,
-learning_rate 5e-4, train_freq 1, gradient_steps 1, update_mode "per_step"), and ``batch``, the tuned batch-mode
-entries of ``hyperparams/nstep_sarsa.yml`` (8 envs per seed, train_freq 16, gradient_steps 8, 2 × 256 MLP; Acrobot-v1's
-with its bootstrap network, weight average, λ-returns and Expected SARSA).
+CPU seconds of K seeds of one setting trained in lockstep (``NStepSARSAPopulation``, ``REINFORCEPopulation``) against
+the same K seeds trained one after the other (``model.learn``), in one process with one PyTorch thread. Two families of
+settings (``--settings``) per algorithm (``--algo``):
+
+- ``per_step``: NStepSARSA in the book's per-step mode (2 × 128 MLP, n_steps 10 on CartPole-v1 and 5 on Acrobot-v1,
+  learning_rate 5e-4, train_freq 1, gradient_steps 1, update_mode "per_step"); REINFORCE's per-step final model of the
+  seed report on CartPole-v1 (``studies/seed_report/fig08-reinforce-cartpole-final.yml``);
+- ``batch``: the tuned batch-mode entries of ``hyperparams/nstep_sarsa.yml`` (8 envs per seed, train_freq 16,
+  gradient_steps 8, 2 × 256 MLP; Acrobot-v1's with its bootstrap network, weight average, λ-returns and Expected SARSA)
+  and of ``hyperparams/reinforce.yml`` (one env, one Adam step per episode).
 
     python -m benchmarks.lockstep                       # writes benchmarks/results/lockstep.{csv,md}
     python -m benchmarks.lockstep --k 10 --steps 3000 --settings per_step
-    python -m benchmarks.lockstep --k 10 --batch-steps 20000 --settings batch
+    python -m benchmarks.lockstep --k 10 --batch-steps 20000 --settings batch --algo REINFORCE
 
 Seconds are ``time.process_time`` of training only (the models are built before the clock starts).
 """
@@ -25,10 +29,13 @@ from pathlib import Path
 from typing import Any
 
 import torch as th
+import yaml
+from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.env_util import make_vec_env
 
-from sb3_classic import NStepSARSA
+from sb3_classic import REINFORCE, NStepSARSA
 from sb3_classic.harness.common import load_hyperparams, positive_int
+from sb3_classic.reinforce import REINFORCEPopulation
 from sb3_classic.sarsa import NStepSARSAPopulation
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -36,6 +43,9 @@ N_STEPS = {"CartPole-v1": 10, "Acrobot-v1": 5}
 SETTING = "per_step: 2x128 MLP, lr 5e-4, train_freq 1, gradient_steps 1"
 #: The families of settings, in the order of the tables
 SETTINGS = ("per_step", "batch")
+ALGOS = ("NStepSARSA", "REINFORCE")
+#: The seed report's per-step final model of REINFORCE on CartPole-v1
+FINAL_PER_STEP = Path(__file__).resolve().parent / "studies" / "seed_report" / "fig08-reinforce-cartpole-final.yml"
 
 
 def make_models(env_id: str, k: int) -> list[NStepSARSA]:
@@ -56,20 +66,23 @@ def make_models(env_id: str, k: int) -> list[NStepSARSA]:
     ]
 
 
-def timed(make: Callable[[], list[NStepSARSA]], steps: int) -> tuple[float, float]:
+def timed(make: Callable[[], list[Any]], steps: int) -> tuple[float, float]:
     """
     :param make: builds the K members (called twice: once for each way of training them)
     :param steps: env steps per seed
     :return: CPU seconds of the K seeds one after the other, and in lockstep
     """
-    models = make()
+    models: list[BaseAlgorithm] = make()
     start = time.process_time()
     for model in models:
         model.learn(steps)
     separate = time.process_time() - start
     models = make()
     start = time.process_time()
-    NStepSARSAPopulation(models).learn(steps)
+    if isinstance(models[0], REINFORCE):
+        REINFORCEPopulation(models).learn(steps)  # type: ignore[arg-type]
+    else:
+        NStepSARSAPopulation(models).learn(steps)  # type: ignore[arg-type]
     return separate, time.process_time() - start
 
 
@@ -78,7 +91,7 @@ def per_step_rows(env_ids: list[str], k: int, steps: int) -> list[dict[str, Any]
     rows = []
     for env_id in env_ids:
         separate, lockstep = timed(lambda env_id=env_id: make_models(env_id, k), steps)  # type: ignore[misc]
-        rows.append(row(env_id, f"{SETTING}, n_steps {N_STEPS[env_id]}", k, steps, separate, lockstep))
+        rows.append(row("NStepSARSA", env_id, f"{SETTING}, n_steps {N_STEPS[env_id]}", k, steps, separate, lockstep))
     return rows
 
 
@@ -127,15 +140,62 @@ def batch_rows(env_ids: list[str], k: int, steps: int) -> list[dict[str, Any]]:
             f"gradient_steps {hyperparams['gradient_steps']}, 2x256 MLP)"
         )
         separate, lockstep = timed(lambda env_id=env_id: make_yaml_models(env_id, k), steps)  # type: ignore[misc]
-        rows.append(row(env_id, setting, k, steps, separate, lockstep))
+        rows.append(row("NStepSARSA", env_id, setting, k, steps, separate, lockstep))
     return rows
 
 
-def row(env_id: str, setting: str, k: int, steps: int, separate: float, lockstep: float) -> dict[str, Any]:
+def _policy_kwargs(value: str | dict[str, Any] | None) -> dict[str, Any]:
+    """
+    :param value: ``policy_kwargs`` as a zoo YAML writes it (a string the zoo evaluates, with ``nn`` for torch.nn) or
+        as a study YAML does (a mapping, classes named ``nn.X``)
+    :return: the keyword arguments
+    """
+    if value is None:
+        return {}
+    if isinstance(value, str):
+        return dict(eval(value, {"nn": th.nn, "dict": dict}))  # the zoo's own parsing of the string
+    return {
+        key: getattr(th.nn, item[3:]) if isinstance(item, str) and item.startswith("nn.") else item
+        for key, item in value.items()
+    }
+
+
+def reinforce_settings() -> list[tuple[str, str, dict[str, Any]]]:
+    """:return: (env id, setting name, REINFORCE's keyword arguments) of each REINFORCE row"""
+    settings = []
+    for env_id in N_STEPS:
+        entry = load_hyperparams("reinforce", env_id)
+        kwargs = {key: value for key, value in entry.items() if key not in ("n_timesteps", "policy", "n_envs")}
+        kwargs["policy_kwargs"] = _policy_kwargs(kwargs.get("policy_kwargs"))
+        settings.append((env_id, "batch: hyperparams/reinforce.yml", kwargs))
+    study = yaml.safe_load(FINAL_PER_STEP.read_text())
+    kwargs = {key: value for key, value in study["hyperparams"].items() if key not in ("policy", "n_envs")}
+    kwargs["policy_kwargs"] = _policy_kwargs(kwargs.get("policy_kwargs"))
+    settings.append((study["env"], "per_step: the seed report's final model (fig08)", kwargs))
+    return settings
+
+
+def make_reinforce_models(env_id: str, k: int, kwargs: dict[str, Any]) -> list[REINFORCE]:
+    """:return: K REINFORCE members of one setting, seeds 0..K-1, each with its own env seeded as its model"""
+    return [REINFORCE("MlpPolicy", make_vec_env(env_id, n_envs=1, seed=seed), seed=seed, **kwargs) for seed in range(k)]
+
+
+def reinforce_rows(family: str, env_ids: list[str], k: int, steps: int) -> list[dict[str, Any]]:
+    """:return: the REINFORCE rows of one family of settings (``per_step`` or ``batch``) on the given envs"""
+    rows = []
+    for env_id, setting, kwargs in reinforce_settings():
+        if env_id not in env_ids or not setting.startswith(family):
+            continue
+        separate, lockstep = timed(lambda env_id=env_id, kwargs=kwargs: make_reinforce_models(env_id, k, kwargs), steps)  # type: ignore[misc]
+        rows.append(row("REINFORCE", env_id, setting, k, steps, separate, lockstep))
+    return rows
+
+
+def row(algo: str, env_id: str, setting: str, k: int, steps: int, separate: float, lockstep: float) -> dict[str, Any]:
     """:return: a row of the CSV (``steps`` is kept for the table, not written to the CSV), printed as it is made"""
-    print(f"{env_id}, {setting.split(':')[0]}: separate {separate:.2f} s, lockstep {lockstep:.2f} s, "
+    print(f"{algo} {env_id}, {setting.split(':')[0]}: separate {separate:.2f} s, lockstep {lockstep:.2f} s, "
           f"{separate / lockstep:.2f}x", flush=True)  # fmt: skip
-    return dict(algo="NStepSARSA", env_id=env_id, setting=setting, k=k, separate_cpu_s=f"{separate:.2f}",
+    return dict(algo=algo, env_id=env_id, setting=setting, k=k, separate_cpu_s=f"{separate:.2f}",
                 lockstep_cpu_s=f"{lockstep:.2f}", steps=steps)  # fmt: skip
 
 
@@ -159,14 +219,19 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--settings", type=settings_list, default=list(SETTINGS), help=f"comma-separated, of {', '.join(SETTINGS)}"
     )
+    parser.add_argument("--algo", nargs="+", default=list(ALGOS), choices=list(ALGOS), help="the algorithms' rows")
     parser.add_argument("--out", type=Path, default=RESULTS, help="the folder of lockstep.csv and lockstep.md")
     args = parser.parse_args(argv)
     th.set_num_threads(1)
     rows = []
-    if "per_step" in args.settings:
+    if "NStepSARSA" in args.algo and "per_step" in args.settings:
         rows += per_step_rows(args.env, args.k, args.steps)
-    if "batch" in args.settings:
+    if "NStepSARSA" in args.algo and "batch" in args.settings:
         rows += batch_rows(args.env, args.k, args.batch_steps)
+    if "REINFORCE" in args.algo and "per_step" in args.settings:
+        rows += reinforce_rows("per_step", args.env, args.k, args.steps)
+    if "REINFORCE" in args.algo and "batch" in args.settings:
+        rows += reinforce_rows("batch", args.env, args.k, args.batch_steps)
     args.out.mkdir(parents=True, exist_ok=True)
     columns = ["algo", "env_id", "setting", "k", "separate_cpu_s", "lockstep_cpu_s"]
     with open(args.out / "lockstep.csv", "w", newline="") as file:
@@ -175,15 +240,16 @@ def main(argv: list[str] | None = None) -> None:
         writer.writerows(rows)
     command = "python -m benchmarks.lockstep " + shlex.join(argv if argv is not None else sys.argv[1:])
     table = "\n".join(
-        f"| {row['env_id']} | {row['setting'].split(':')[0]} | {row['k']} | {row['steps']} | {row['separate_cpu_s']} | "
+        f"| {row['algo']} | {row['env_id']} | {row['setting'].split(':')[0]} | {row['k']} | {row['steps']} | "
+        f"{row['separate_cpu_s']} | "
         f"{row['lockstep_cpu_s']} | {float(row['separate_cpu_s']) / float(row['lockstep_cpu_s']):.2f}× |"
         for row in rows
     )
-    settings = "\n".join(f"- {row['env_id']}, {row['setting']}" for row in rows)
+    settings = "\n".join(f"- {row['algo']}, {row['env_id']}, {row['setting']}" for row in rows)
     (args.out / "lockstep.md").write_text(
         f"""# K seeds in lockstep against one after the other
 
-NStepSARSA; CPU seconds (`time.process_time`) of training only, one process, one PyTorch thread
+CPU seconds (`time.process_time`) of training only, one process, one PyTorch thread
 (OMP_NUM_THREADS={os.environ.get("OMP_NUM_THREADS", "unset")}). The settings:
 
 {settings}
@@ -193,8 +259,8 @@ NStepSARSA; CPU seconds (`time.process_time`) of training only, one process, one
 Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} logical CPUs (shared with other jobs while
 measured), Python {platform.python_version()}, torch {th.__version__}.
 
-| env | setting | K | env steps per seed | one after the other (s) | lockstep (s) | ratio |
-|---|---|---|---|---|---|---|
+| algorithm | env | setting | K | env steps per seed | one after the other (s) | lockstep (s) | ratio |
+|---|---|---|---|---|---|---|---|
 {table}
 
 Where the time goes (cProfile of 10 CartPole-v1 members in lockstep). Per-step setting, 1,500 env steps each: a
@@ -204,6 +270,11 @@ env step (its rollout bookkeeping and callback, its ε-greedy draw, its windows,
 not share. Batch setting, 8,192 env steps each: half in the stacked gradient steps, whose backward pass through the
 2 × 256 layers at batches of about 128 is bound by arithmetic (it costs what the members' own backward passes cost), and
 over a quarter in the members' envs.
+
+REINFORCE's batch mode shares the forward pass of the rollouts; its updates, one per episode and member, seldom fall
+on the same env step, so most stacked gradient steps train one member, and each member's own work per env step (its
+env and VecEnv, the rollout loop's bookkeeping) is most of the time. The per-step mode trains an episode's T steps one
+stacked gradient step at a time while the other members go on with theirs, and shares those steps too.
 """
     )
 

@@ -384,77 +384,106 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
         :return: False if the callback stopped training
         """
         assert self._last_obs is not None, "No previous observation was provided"
-        self.policy.set_training_mode(False)
-        self._episodes_before_rollout = self._completed_episodes
-        callback.on_rollout_start()
+        self._start_rollout(callback)
         n_steps, n_episodes = 0, 0
-        use_masking, action_masks, final_action_masks = self._use_masking, None, None
         while True:
             if n_rollout_steps is None:
                 if self._rollout_complete(n_steps, n_episodes):
                     break
             elif n_steps >= n_rollout_steps:
                 break
-            if use_masking:
-                # Read before the action is chosen, as sb3-contrib's MaskablePPO reads them
-                action_masks = self._read_action_masks(env)
-            with th.no_grad():
-                actions = self._sample_actions(self._last_obs, action_masks)  # type: ignore[arg-type]
-            env_actions = actions
-            if self._action_offset is not None:
-                # The buffer and the networks use indices 0..n-1, the env its own values start..start+n-1
-                env_actions = actions + self._action_offset
-            elif isinstance(self.action_space, spaces.Box):
-                # The Gaussian is unbounded: clip what the env sees, store what was sampled
-                env_actions = np.clip(actions, self.action_space.low, self.action_space.high)
-            new_obs, rewards, dones, infos = env.step(env_actions)
-            # A VecEnv of the user's may return 0/1 integers or floats: as an index, [1, 0] would select envs 1 and 0
-            dones = np.asarray(dones, dtype=bool)
-            self.num_timesteps += env.num_envs
+            continue_training, n_ended = self._rollout_step(env, callback, rollout_buffer, n_steps, n_episodes)
             n_steps += 1
-
-            # The callback runs before the step is stored, as in SB3's loops: one that changes rewards (or
-            # observations) in place in _on_step, to shape or rescale them, changes what is trained on
-            callback.update_locals(locals())
-            continue_training = callback.on_step()
-
-            # Nothing is stored or trained on if a value is NaN or ±inf: the model stays as its last update left it.
-            # Checked after the callback, on the values that would be stored; final observations in _episode_ends
-            if not (np.isfinite(rewards).all() and all_finite(new_obs)):  # type: ignore[arg-type]
-                episode_length = self.rollout_buffer.episode_length
-                if not np.isfinite(rewards).all():
-                    raise_non_finite(self, episode_length, rewards, "reward")
-                raise_non_finite(self, episode_length, new_obs, "observation", after_reset=dones)  # type: ignore[arg-type]
-            ends, truncated, final_observations = self._episode_ends(new_obs, dones, infos)  # type: ignore[arg-type]
-            if use_masking and final_observations:
-                final_action_masks = self._final_action_masks(infos, final_observations)
-            # Stored even when the callback stops training, so that the buffer and the envs stay in step: the next
-            # learn() goes on from the step the envs are at
-            rollout_buffer.add(
-                self._last_obs,  # type: ignore[arg-type]
-                actions,
-                rewards,
-                ends,
-                truncated,
-                final_observations,
-                action_masks,
-                final_action_masks,
-            )
-            final_action_masks = None
-            self._last_obs = new_obs  # type: ignore[assignment]
-            # The training episodes' starts: an episode cut at max_episode_length starts a new one where the env goes on
-            # (with the env's dones, the next learn() would take the cut for the start of an episode missing from the buffer)
-            self._last_episode_starts = ends
-            self._update_info_buffer(infos, dones)
-            if ends.any():
-                n_episodes += int(ends.sum())
-                self._on_episodes_end(int(ends.sum()))
+            n_episodes += n_ended
             if not continue_training:
                 return False
 
         callback.update_locals(locals())
         callback.on_rollout_end()
         return True
+
+    def _start_rollout(self, callback: BaseCallback) -> None:
+        """
+        The start of a rollout (``collect_rollouts``): evaluation mode, the episodes counted so far kept for this
+        rollout's update, the callback's ``on_rollout_start``.
+
+        :param callback: the rollout's callback
+        """
+        self.policy.set_training_mode(False)
+        self._episodes_before_rollout = self._completed_episodes
+        callback.on_rollout_start()
+
+    def _rollout_step(
+        self, env: VecEnv, callback: BaseCallback, rollout_buffer: TrajectoryBuffer, n_steps: int, n_episodes: int
+    ) -> tuple[bool, int]:
+        """
+        One step of ``collect_rollouts``: an action per env from the behaviour policy, the envs' step, the callback's
+        ``on_step``, the transitions stored.
+
+        :param env: the training environment
+        :param callback: callback called at the step
+        :param rollout_buffer: buffer to fill
+        :param n_steps: steps per env taken in this rollout before this one (the callback's ``locals``, as SB3's)
+        :param n_episodes: episodes ended in this rollout before this step (the callback's ``locals``)
+        :return: False if the callback stopped training, and the episodes this step ended (all envs together)
+        :raises ValueError: if the envs returned NaN or ±inf (nothing of the step is stored)
+        """
+        use_masking, action_masks, final_action_masks = self._use_masking, None, None
+        if use_masking:
+            # Read before the action is chosen, as sb3-contrib's MaskablePPO reads them
+            action_masks = self._read_action_masks(env)
+        with th.no_grad():
+            actions = self._sample_actions(self._last_obs, action_masks)  # type: ignore[arg-type]
+        env_actions = actions
+        if self._action_offset is not None:
+            # The buffer and the networks use indices 0..n-1, the env its own values start..start+n-1
+            env_actions = actions + self._action_offset
+        elif isinstance(self.action_space, spaces.Box):
+            # The Gaussian is unbounded: clip what the env sees, store what was sampled
+            env_actions = np.clip(actions, self.action_space.low, self.action_space.high)
+        new_obs, rewards, dones, infos = env.step(env_actions)
+        # A VecEnv of the user's may return 0/1 integers or floats: as an index, [1, 0] would select envs 1 and 0
+        dones = np.asarray(dones, dtype=bool)
+        self.num_timesteps += env.num_envs
+        n_steps += 1
+
+        # The callback runs before the step is stored, as in SB3's loops: one that changes rewards (or
+        # observations) in place in _on_step, to shape or rescale them, changes what is trained on
+        callback.update_locals(locals())
+        continue_training = callback.on_step()
+
+        # Nothing is stored or trained on if a value is NaN or ±inf: the model stays as its last update left it.
+        # Checked after the callback, on the values that would be stored; final observations in _episode_ends
+        if not (np.isfinite(rewards).all() and all_finite(new_obs)):  # type: ignore[arg-type]
+            episode_length = self.rollout_buffer.episode_length
+            if not np.isfinite(rewards).all():
+                raise_non_finite(self, episode_length, rewards, "reward")
+            raise_non_finite(self, episode_length, new_obs, "observation", after_reset=dones)  # type: ignore[arg-type]
+        ends, truncated, final_observations = self._episode_ends(new_obs, dones, infos)  # type: ignore[arg-type]
+        if use_masking and final_observations:
+            final_action_masks = self._final_action_masks(infos, final_observations)
+        # Stored even when the callback stops training, so that the buffer and the envs stay in step: the next
+        # learn() goes on from the step the envs are at
+        rollout_buffer.add(
+            self._last_obs,  # type: ignore[arg-type]
+            actions,
+            rewards,
+            ends,
+            truncated,
+            final_observations,
+            action_masks,
+            final_action_masks,
+        )
+        self._last_obs = new_obs  # type: ignore[assignment]
+        # The training episodes' starts: an episode cut at max_episode_length starts a new one where the env goes on
+        # (with the env's dones, the next learn() would take the cut for the start of an episode missing from the buffer)
+        self._last_episode_starts = ends
+        self._update_info_buffer(infos, dones)
+        n_ended = 0
+        if ends.any():
+            n_ended = int(ends.sum())
+            self._on_episodes_end(n_ended)
+        return continue_training, n_ended
 
     def learn(
         self: SelfClassicOnPolicyAlgorithm,

@@ -58,14 +58,20 @@ class StackedLinear(nn.Module):
             bias = None if linears[0].bias is None else th.stack([linear.bias for linear in linears]).unsqueeze(1)
         return cls(weight, bias)
 
-    def forward(self, x: th.Tensor) -> th.Tensor:
+    def forward(self, x: th.Tensor, members: th.Tensor | None = None) -> th.Tensor:
         """
-        :param x: the members' inputs, shape (K, B, in_features)
-        :return: x_k W_k + b_k for every member, shape (K, B, out_features)
+        :param x: the members' inputs, shape (K, B, in_features), or (M, B, in_features) for the M ``members``
+        :param members: the members whose layers to apply, shape (M,), int64; None: all K
+        :return: x_k W_k + b_k for every member (each of ``members``), shape (K or M, B, out_features)
         """
-        if self.bias is None:
-            return th.bmm(x, self.weight)
-        return th.baddbmm(self.bias, x, self.weight)
+        weight: th.Tensor = self.weight
+        bias: th.Tensor | None = self.bias
+        if members is not None:
+            weight = weight.index_select(0, members)
+            bias = None if bias is None else bias.index_select(0, members)
+        if bias is None:
+            return th.bmm(x, weight)
+        return th.baddbmm(bias, x, weight)
 
     def share_with(self, linears: Sequence[nn.Linear]) -> None:
         """
@@ -106,10 +112,11 @@ class StackedMLP(nn.Module):
         self.layers = nn.Sequential(*layers)
 
     @classmethod
-    def from_sequentials(cls, networks: Sequence[nn.Sequential]) -> "StackedMLP":
+    def from_sequentials(cls, networks: Sequence[nn.Sequential], name: str = "q̂") -> "StackedMLP":
         """
         :param networks: the members' MLPs: ``nn.Linear`` layers and elementwise activations without parameters
             (``ELEMENTWISE_ACTIVATIONS``), of the same sizes and activations
+        :param name: the networks' name in the errors
         :return: the stacked MLP holding copies of their weights (``share_with`` makes the members' parameters views of
             them)
         :raises TypeError: for a layer of another kind
@@ -122,8 +129,8 @@ class StackedMLP(nn.Module):
             for member, other in enumerate(column):
                 if other is None or type(other) is not type(layer) or repr(other) != repr(layer):
                     raise ValueError(
-                        f"member {member}'s q̂ differs from member 0's at layer {index} ({other!r} against {layer!r}): the "
-                        "members of a population have one setting (the same net_arch, activation_fn and its kwargs)"
+                        f"member {member}'s {name} differs from member 0's at layer {index} ({other!r} against {layer!r}): "
+                        "the members of a population have one setting (the same net_arch, activation_fn and its kwargs)"
                     )
             if isinstance(layer, nn.Linear):
                 layers.append(StackedLinear.from_linears(column))  # type: ignore[arg-type]
@@ -131,7 +138,7 @@ class StackedMLP(nn.Module):
                 layers.append(layer)
             else:
                 raise TypeError(
-                    f"layer {index} of q̂ is a {type(layer).__name__}: a stacked network holds linear layers and "
+                    f"layer {index} of {name} is a {type(layer).__name__}: a stacked network holds linear layers and "
                     f"elementwise activations ({', '.join(kind.__name__ for kind in ELEMENTWISE_ACTIVATIONS)}). Train "
                     "these members one after the other (model.learn)"
                 )
@@ -156,19 +163,18 @@ class StackedMLP(nn.Module):
         for network in networks:
             StackedLinear.own_storage(_linears(network))
 
-    def forward(self, x: th.Tensor) -> th.Tensor:
+    def forward(self, x: th.Tensor, members: th.Tensor | None = None) -> th.Tensor:
         """
         The layers are called directly (``torch.baddbmm`` and each activation's ``forward``), past ``nn.Module``'s call
         machinery, whose cost is most of a small network's forward pass.
 
-        :param x: the members' inputs, shape (K, B, in_features)
-        :return: every member's outputs, shape (K, B, out_features)
+        :param x: the members' inputs, shape (K, B, in_features), or (M, B, in_features) for the M ``members``
+        :param members: the members whose networks to apply, shape (M,), int64; None: all K (a gradient then reaches
+            the given members' slices only)
+        :return: every member's outputs (each of ``members``'), shape (K or M, B, out_features)
         """
         for layer in self.layers:
-            if isinstance(layer, StackedLinear):
-                x = th.bmm(x, layer.weight) if layer.bias is None else th.baddbmm(layer.bias, x, layer.weight)
-            else:
-                x = layer.forward(x)
+            x = layer.forward(x, members) if isinstance(layer, StackedLinear) else layer.forward(x)
         return x
 
     @th.no_grad()

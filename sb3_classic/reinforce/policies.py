@@ -322,6 +322,15 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         # π(a|s, θ) = soft-max of the action preferences h(s, a, θ) (S&B eq. 13.2)
         return th.multinomial(th.softmax(logits, dim=-1), 1, replacement=True).squeeze(-1)
 
+    def action_logits(self, obs: PyTorchObs) -> th.Tensor:
+        """
+        :param obs: observations
+        :return: the action preferences h(s, ·, θ) of Discrete actions (the logits π is the soft-max of, S&B eq. 13.2),
+            shape (batch, n_actions)
+        """
+        features = BaseModel.extract_features(self, obs, self.pi_features_extractor)
+        return self.action_net(self.mlp_extractor.forward_actor(features))
+
     def set_training_mode(self, mode: bool) -> None:
         """
         :param mode: train (True) or evaluation (False) mode of every module; nothing to do if already there (the

@@ -18,6 +18,39 @@ from sb3_classic.reinforce.policies import CnnPolicy, MlpPolicy, MultiInputPolic
 SelfREINFORCE = TypeVar("SelfREINFORCE", bound="REINFORCE")
 
 
+def softmax_cdf(logits: np.ndarray) -> np.ndarray:
+    """
+    :param logits: action preferences h(s, ·, θ), shape (..., n_actions)
+    :return: the cumulative probabilities of their soft-max π(·|s) (S&B eq. 13.2), unnormalised (the last one is the
+        normaliser Σ_a e^{h(s, a) − max_b h(s, b)}), float64, the same shape
+    """
+    logits = np.asarray(logits, dtype=np.float64)
+    return np.cumsum(np.exp(logits - logits.max(axis=-1, keepdims=True)), axis=-1)
+
+
+def draw_from_cdf(cdf: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """
+    A ~ π(·|s) for each row by the inverse CDF: the first action whose cumulative probability exceeds one uniform draw
+    u ~ U[0, 1) of ``rng`` scaled by the row's total (so that rounding leaves no gap at the top).
+
+    :param cdf: ``softmax_cdf``'s, shape (B, n_actions)
+    :param rng: the generator of the draws (one ``rng.random((B, 1))`` call: B draws, in row order)
+    :return: the action indices, shape (B,), int64
+    """
+    u = rng.random((len(cdf), 1)) * cdf[:, -1:]
+    # (the count over all but the last action: at most the last index, even where rounding puts u at the total)
+    return (cdf[:, :-1] <= u).sum(axis=-1)
+
+
+def categorical_inverse_cdf(logits: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """
+    :param logits: the action preferences h(s, ·, θ), shape (B, n_actions)
+    :param rng: the generator of the draws (B draws, in row order)
+    :return: A ~ π(·|s) of each row (``draw_from_cdf`` of ``softmax_cdf``), shape (B,), int64
+    """
+    return draw_from_cdf(softmax_cdf(logits), rng)
+
+
 class REINFORCE(ClassicOnPolicyAlgorithm):
     """
     REINFORCE with baseline: Monte-Carlo policy gradient with a learned state-value baseline
@@ -172,6 +205,12 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         self.gamma_t_factor = gamma_t_factor
         self.normalize_advantage = normalize_advantage
         self.ent_coef = ent_coef
+        # The generator of the rollouts' action draws; None: torch's global one (``multinomial``), seeded by SB3
+        self._action_rng: np.random.Generator | None = None
+        # π's cumulative probabilities (softmax_cdf) of the current observations computed outside the model (from a
+        # population's stacked forward pass, reinforce/lockstep.py), taken by the next _sample_actions in place of a
+        # forward pass of its own
+        self._next_cdf: np.ndarray | None = None
         if _init_setup_model:
             self._setup_model()  # (which checks the arguments first)
 
@@ -203,6 +242,8 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         )
 
     def _sample_actions(self, obs: np.ndarray | dict[str, np.ndarray], action_masks: np.ndarray | None = None) -> np.ndarray:
+        if self._action_rng is not None:
+            return self._draw_actions(obs, action_masks)
         # A ~ π(·|S, θ) over the legal actions; the baseline v̂ is only needed at update time
         actions = self.policy.sample_actions(obs_as_tensor(obs, self.device), action_masks).cpu().numpy()
         if isinstance(self.action_space, spaces.Box):
@@ -210,6 +251,35 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             # (as SB3's ActorCriticPolicy.forward reshapes them), e.g. (n_envs, 2, 3) for Box(shape=(2, 3))
             actions = actions.reshape((-1, *self.action_space.shape))
         return actions
+
+    def _draw_actions(self, obs: np.ndarray | dict[str, np.ndarray], action_masks: np.ndarray | None) -> np.ndarray:
+        """
+        ``_sample_actions`` with ``_action_rng`` set: A ~ π(·|S, θ) by the inverse CDF of the soft-max of the logits
+        (``categorical_inverse_cdf``), one uniform draw of ``_action_rng`` per env. The cumulative probabilities are
+        those the population computed (``_next_cdf``, taken once) or those of the policy's forward pass.
+
+        :param obs: the current observations of all envs
+        :param action_masks: must be None or allow every action (the draw is over all actions)
+        :return: one action index per env, shape (n_envs,)
+        :raises ValueError: for actions other than Discrete, a policy with its own forward or distribution, or masks
+            that make an action illegal
+        """
+        if not isinstance(self.action_space, spaces.Discrete) or self.policy._own_forward or not self.policy._sb3_distribution:
+            raise ValueError(
+                f"_action_rng draws Discrete actions from the soft-max of REINFORCEPolicy's logits, not {self.action_space} "
+                f"actions of a {type(self.policy).__name__}: set model._action_rng = None"
+            )
+        if action_masks is not None and not action_masks.all():
+            raise ValueError(
+                "_action_rng draws over all actions, without masks: set model._action_rng = None, or learn(use_masking=False)"
+            )
+        cdf = self._next_cdf
+        if cdf is None:
+            cdf = softmax_cdf(self.policy.action_logits(obs_as_tensor(obs, self.device)).cpu().numpy())
+        else:
+            self._next_cdf = None
+        assert self._action_rng is not None
+        return draw_from_cdf(cdf, self._action_rng)
 
     def _rollout_complete(self, n_steps: int, n_episodes: int) -> bool:
         return n_episodes >= self.n_episodes
@@ -316,12 +386,7 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
 
     def train(self) -> None:
         """Update both networks on every complete episode in the buffer (``update_mode``: batch mean or per step)."""
-        self.policy.set_training_mode(True)
-        schedules = [(self.policy.optimizer, self.lr_schedule, "train/learning_rate")]
-        if self.policy.value_optimizer is not None:
-            schedules.append((self.policy.value_optimizer, self.value_lr_schedule, "train/value_learning_rate"))
-        self._update_learning_rates(schedules)
-        batch = self._training_batch()
+        batch = self._start_update()
         if batch is None:
             return
         observations = obs_as_tensor(batch.observations, self.device)
@@ -339,18 +404,56 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             steps.append(
                 self._gradient_step(chunk_observations, actions[chunk], returns[chunk], episode_steps[chunk], chunk_masks)  # type: ignore[arg-type]
             )
+        values = th.cat([step["values"] for step in steps]) if self.use_baseline else None
+        self._finish_update(
+            batch,
+            th.stack([step["policy_loss"] for step in steps]),
+            th.stack([step["entropy_loss"] for step in steps]),
+            th.stack([step["value_loss"] for step in steps]),
+            values,
+        )
 
+    def _start_update(self) -> TrainingBatch | None:
+        """
+        The first half of ``train``: the learning rates α^θ and α^w of this update set (schedule and decay) and
+        logged.
+
+        :return: the update's steps (``_training_batch``), None if no episode has ended
+        """
+        self.policy.set_training_mode(True)
+        schedules = [(self.policy.optimizer, self.lr_schedule, "train/learning_rate")]
+        if self.policy.value_optimizer is not None:
+            schedules.append((self.policy.value_optimizer, self.value_lr_schedule, "train/value_learning_rate"))
+        self._update_learning_rates(schedules)
+        return self._training_batch()
+
+    def _finish_update(
+        self,
+        batch: TrainingBatch,
+        policy_losses: th.Tensor,
+        entropy_losses: th.Tensor,
+        value_losses: th.Tensor,
+        values: th.Tensor | None,
+    ) -> None:
+        """
+        The second half of ``train``, after its gradient steps: the steps marked trained, the counts and the log.
+
+        :param batch: the update's steps (``_start_update``'s)
+        :param policy_losses: each gradient step's policy loss, shape (n_gradient_steps,)
+        :param entropy_losses: each gradient step's entropy loss, shape (n_gradient_steps,)
+        :param value_losses: each gradient step's value loss, shape (n_gradient_steps,)
+        :param values: v̂(S_t, w) of the batch's steps before their gradient steps, shape (B,); None without a baseline
+        """
         self.rollout_buffer.mark_trained(batch.n_trained)
-        self._n_updates += len(steps)
+        self._n_updates += len(policy_losses)
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         # Every episode in the buffer is held from its first step (t = 0)
         self.logger.record("train/n_episodes", int((batch.episode_steps == 0).sum()))
-        self.logger.record("train/policy_loss", th.stack([step["policy_loss"] for step in steps]).mean().item())
-        self.logger.record("train/entropy_loss", th.stack([step["entropy_loss"] for step in steps]).mean().item())
-        if self.use_baseline:
-            values = th.cat([step["values"] for step in steps])
-            self.logger.record("train/value_loss", th.stack([step["value_loss"] for step in steps]).mean().item())
-            self.logger.record("train/explained_variance", explained_variance(values.cpu().numpy(), returns.cpu().numpy()))
+        self.logger.record("train/policy_loss", policy_losses.mean().item())
+        self.logger.record("train/entropy_loss", entropy_losses.mean().item())
+        if values is not None:
+            self.logger.record("train/value_loss", value_losses.mean().item())
+            self.logger.record("train/explained_variance", explained_variance(values.cpu().numpy(), batch.targets))
         if hasattr(self.policy, "log_std"):
             self.logger.record("train/std", th.exp(self.policy.log_std).mean().item())
 
@@ -411,6 +514,10 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         :return: the actions, and the unchanged state
         """
         return self.policy.predict(observation, state, episode_start, deterministic, action_masks=action_masks)
+
+    def _excluded_save_params(self) -> list[str]:
+        # A population's generator and probabilities (they are the population's): not training state
+        return [*super()._excluded_save_params(), "_action_rng", "_next_cdf"]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         optimizers = ["policy.optimizer"] + (["policy.value_optimizer"] if self.use_baseline else [])

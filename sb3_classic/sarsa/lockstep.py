@@ -13,8 +13,7 @@ from stable_baselines3.common.type_aliases import MaybeCallback
 from stable_baselines3.dqn.policies import QNetwork
 from torch import nn
 
-from sb3_classic.common.buffers import TrainingBatch, all_finite
-from sb3_classic.common.env_checks import raise_non_finite
+from sb3_classic.common.buffers import TrainingBatch
 from sb3_classic.common.stacked import StackedAdam, StackedMLP, clip_grad_norms_per_member
 from sb3_classic.common.utils import check_positive_int
 from sb3_classic.sarsa.nstep_sarsa import LOG_EVERY_STEPS, NStepSARSA
@@ -293,10 +292,10 @@ def _finish_learn(
 class _Rollout:
     """
     A member's rollout loop (``ClassicOnPolicyAlgorithm.collect_rollouts``), one env step at a time, so that the
-    population can choose every member's action from one stacked forward pass: the same effects on the member (its
-    behaviour policy's draws, its env and Monitor, ``num_timesteps``, its callback's ``on_rollout_start``, ``on_step``
-    with the rollout loop's locals and ``on_rollout_end``, the checks for NaN and ±inf, the buffer, the episode counts
-    and ε), without masks (the population reads none).
+    population can choose every member's action from one stacked forward pass: the member's own ``_start_rollout`` and
+    ``_rollout_step`` (its behaviour policy's draws, its env and Monitor, ``num_timesteps``, its callback's
+    ``on_step``, the checks for NaN and ±inf, the buffer, the episode counts and ε), without masks (the population reads
+    none), and the rollout's end as ``collect_rollouts`` ends it.
 
     :param model: the member
     :param callback: its callback, as ``_setup_learn`` made it
@@ -319,56 +318,21 @@ class _Rollout:
         :return: whether the rollout is complete (the update's turn); None if the callback stopped training
         :raises ValueError: the member's own error for a non-finite reward or observation
         """
-        model, callback, env, buffer = self.model, self.callback, self.env, self.model.rollout_buffer
+        model, callback = self.model, self.callback
         if not self.running:
-            model.policy.set_training_mode(False)
-            model._episodes_before_rollout = model._completed_episodes
-            callback.on_rollout_start()
+            model._start_rollout(callback)
             self.running, self.n_steps, self.n_episodes = True, 0, 0
-        # (from the stacked forward pass's q̂: no forward pass of the member's own, nothing for autograd to record)
+        # (from the stacked forward pass's q̂: no forward pass of the member's own)
         model._next_q_values = q_values
-        actions = model._sample_actions(model._last_obs)  # type: ignore[arg-type]
-        env_actions = actions if model._action_offset is None else actions + model._action_offset
-        new_obs, rewards, dones, infos = env.step(env_actions)
-        dones = np.asarray(dones, dtype=bool)
-        model.num_timesteps += env.num_envs
-        self.n_steps += 1
-        # The callback runs before the step is stored, with the rollout loop's locals, as in collect_rollouts
-        callback.update_locals(
-            dict(
-                self=model,
-                env=env,
-                callback=callback,
-                rollout_buffer=buffer,
-                n_rollout_steps=None,
-                n_steps=self.n_steps,
-                n_episodes=self.n_episodes,
-                use_masking=False,
-                action_masks=None,
-                final_action_masks=None,
-                actions=actions,
-                env_actions=env_actions,
-                new_obs=new_obs,
-                rewards=rewards,
-                dones=dones,
-                infos=infos,
+        try:
+            continue_training, n_ended = model._rollout_step(
+                self.env, callback, model.rollout_buffer, self.n_steps, self.n_episodes
             )
-        )
-        continue_training = callback.on_step()
-        if not (np.isfinite(rewards).all() and all_finite(new_obs)):  # type: ignore[arg-type]
+        except ValueError:
             self.running = False
-            if not np.isfinite(rewards).all():
-                raise_non_finite(model, buffer.episode_length, rewards, "reward")
-            raise_non_finite(model, buffer.episode_length, new_obs, "observation", after_reset=dones)  # type: ignore[arg-type]
-        ends, truncated, final_observations = model._episode_ends(new_obs, dones, infos)  # type: ignore[arg-type]
-        buffer.add(model._last_obs, actions, rewards, ends, truncated, final_observations)  # type: ignore[arg-type]
-        model._last_obs = new_obs  # type: ignore[assignment]
-        model._last_episode_starts = ends
-        model._update_info_buffer(infos, dones)
-        if ends.any():
-            n_ended = int(ends.sum())
-            self.n_episodes += n_ended
-            model._on_episodes_end(n_ended)
+            raise
+        self.n_steps += 1
+        self.n_episodes += n_ended
         if not continue_training:
             self.running = False
             return None

@@ -1,0 +1,671 @@
+"""K ``REINFORCE`` models of one setting, each with its own seed and env, trained in lockstep on stacked networks."""
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import torch as th
+import torch.nn.functional as F
+from gymnasium import spaces
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.preprocessing import is_image_space
+from stable_baselines3.common.torch_layers import FlattenExtractor
+from stable_baselines3.common.type_aliases import MaybeCallback
+from torch import nn
+
+from sb3_classic.common.buffers import TrainingBatch
+from sb3_classic.common.masking import is_masking_supported
+from sb3_classic.common.stacked import StackedAdam, StackedMLP, clip_grad_norms_per_member
+from sb3_classic.common.utils import check_positive_int
+from sb3_classic.reinforce.policies import REINFORCEPolicy
+from sb3_classic.reinforce.reinforce import REINFORCE, softmax_cdf
+
+#: What the members of a population share: every argument but ``seed`` and ``env`` (and the env's shape)
+SHARED_SETTINGS = (
+    "policy_class",
+    "policy_kwargs",
+    "learning_rate",
+    "value_learning_rate",
+    "n_episodes",
+    "update_mode",
+    "use_baseline",
+    "gamma",
+    "gamma_t_factor",
+    "normalize_advantage",
+    "ent_coef",
+    "max_grad_norm",
+    "lr_decay_factor",
+    "lr_decay_every",
+    "lr_decay_milestones",
+    "lr_decay_unit",
+    "handle_timeout_termination",
+    "max_episode_length",
+    "n_envs",
+    "observation_space",
+    "action_space",
+    "device",
+)
+
+
+class REINFORCEPopulation:
+    """
+    K ``REINFORCE`` models of one setting (REINFORCE with baseline, Sutton & Barto §13.4, or plain REINFORCE, §13.3),
+    each built as usual with its own seed and env, trained in lockstep: each member steps its own env, with its own
+    episode boundaries, learning-rate schedules and decays, logger, callback and ``TrajectoryBuffer`` (its own
+    ``_training_batch``: its episodes and their returns G_t), as if it ran alone; what the members share is the
+    networks' arithmetic. The members' policy networks π(a|s, θ) (``mlp_extractor.policy_net`` and ``action_net``)
+    are one ``StackedMLP`` and their value networks v̂(s, w) (``mlp_extractor.value_net`` and ``value_net``) another,
+    each with a ``StackedAdam`` (each member its own Adam step count and learning rate, α^θ and α^w as its own
+    optimizers hold them after its schedule and decay). One stacked forward pass of π gives every member's logits at
+    each env step, and one stacked gradient step trains every member that has an update in progress:
+
+    - ``update_mode="batch"``: a member's update is one gradient step of each network on the mean over its batch (the
+      members updating at one env step have batches of different lengths: padded to the longest, each member's mean
+      over its own steps);
+    - ``update_mode="per_step"``: the book's loop, the update's T steps one stacked gradient step at a time, while the
+      other members go on with their env steps and updates (each member makes the updates of its separate run, in
+      the same order).
+
+    Where ``max_grad_norm`` is set, each member's gradient of each network is clipped to its own global norm, as
+    ``REINFORCE`` clips its two networks' gradients separately.
+
+    Member k starts from its own model's weights (those of the separate run with seed k) and Adam states. While
+    ``learn`` runs, its parameters are views into the stacked tensors (the same ``Parameter`` objects, with shared
+    storage): its own code paths (v̂ of a truncation's final state in its returns, its ``predict`` in a callback) read
+    the current weights with no copying. When ``learn`` returns (or raises), each member's parameters get storage of
+    their own again and its two optimizers the Adam states of its slices: the members are K ordinary models that
+    save, load, predict and ``learn`` on their own as any other.
+
+    The actions of member k are drawn from its logits by the inverse CDF of their soft-max (``categorical_inverse_cdf``:
+    the soft-max of every member at once, then one uniform draw per env and step for each member) with a NumPy
+    generator of its own, ``np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(0,)))``, kept by the
+    population across ``learn`` calls, not with torch's global generator that a separate run draws from: member k's
+    draws do not depend on the other members, and a population of the same seeds repeats itself to the bit on the
+    CPU. A separate run with the same seed sees the same transitions only where it draws the same
+    (``model._action_rng`` set to that generator, as the tests do).
+
+    Covered: both update modes, ``use_baseline`` True and False, ``n_episodes``, ``normalize_advantage``,
+    ``gamma_t_factor``, ``ent_coef``, ``max_grad_norm``, schedules and decays, several envs per member, Discrete
+    actions, ``"MlpPolicy"`` (linear layers and elementwise activations) over flat Box observations, and
+    ``torch.optim.Adam`` without weight decay, AMSGrad or ``maximize``. Members train without action masks: an env
+    with masks is refused, as is anything else not covered, with a ``ValueError``/``TypeError`` that names it.
+
+    :param models: the members, ``REINFORCE`` models of one setting (every argument but ``seed`` and ``env``), each
+        with its own seed (not None) and env
+    :raises ValueError: for members of different settings, without a seed or an env, or of a setting not covered
+    :raises TypeError: for networks or optimizers not covered
+    """
+
+    def __init__(self, models: Sequence[REINFORCE]) -> None:
+        check_members(models)
+        self.models = list(models)
+        #: each member's generator of its action draws
+        self.action_rngs = [np.random.default_rng(np.random.SeedSequence(model.seed, spawn_key=(0,))) for model in self.models]
+
+    def learn(
+        self,
+        total_timesteps: int,
+        callback: Sequence[MaybeCallback] | None = None,
+        log_interval: int | None = 4,
+        tb_log_name: str = "REINFORCE",
+        reset_num_timesteps: bool = True,
+    ) -> list[REINFORCE]:
+        """
+        Train every member for at least ``total_timesteps`` env steps (its envs together; its last update waits for
+        its episodes to end), as ``REINFORCE.learn`` would.
+
+        :param total_timesteps: env steps per member
+        :param callback: one callback (or None, or a list of them) per member, in member order; None: none
+        :param log_interval: ``REINFORCE.learn``'s (updates between two logger dumps), for every member's logger
+        :param tb_log_name: the name of each member's run for TensorBoard logging
+        :param reset_num_timesteps: ``REINFORCE.learn``'s, for every member
+        :return: the members, trained
+        :raises ValueError: if a member's env returned NaN or ±inf (the member's usual error, with the member named):
+            that member stops as its last update left it, the others train to the end first
+        """
+        models = self.models
+        callbacks: list[MaybeCallback] = [None] * len(models) if callback is None else list(callback)
+        if len(callbacks) != len(models):
+            raise ValueError(
+                f"callback: {len(callbacks)} callbacks for {len(models)} members: pass one per member (None for none)"
+            )
+        if log_interval is not None:
+            check_positive_int("log_interval", log_interval, hint="Pass the updates between two logger dumps, or None")
+        for model in models:
+            # (no action masks: check_members refused envs with them)
+            model._setup_masking(False)
+        setups = [
+            model._setup_learn(total_timesteps, member_callback, reset_num_timesteps, tb_log_name, False)
+            for model, member_callback in zip(models, callbacks, strict=True)
+        ]
+        totals = [total for total, _ in setups]
+        member_callbacks = [member_callback for _, member_callback in setups]
+        for member_callback in member_callbacks:
+            member_callback.on_training_start(locals(), globals())
+
+        run = _LockstepRun(models, member_callbacks, totals, log_interval)
+        try:
+            for model, rng in zip(models, self.action_rngs, strict=True):
+                model._action_rng = rng
+                # A member's optimizers are not stepped while the population trains it (the StackedAdams are): a file
+                # saved now would hold a stale Adam state, so saving waits until learn returns
+                model.__dict__["save"] = _refuse_save
+            run.run()
+        finally:
+            run.trainer.close()
+            for model in models:
+                model._action_rng = None
+                model._next_cdf = None
+                model.__dict__.pop("save", None)
+        _finish_learn(models, member_callbacks, run.iterations, run.errors, log_interval)
+        return models
+
+
+class _LockstepRun:
+    """
+    The loop of one ``learn`` call: at each tick, every member not updating takes an env step of its rollout (its
+    actions from one stacked forward pass), a member whose rollout is complete starts its update, and one stacked
+    gradient step trains every member with an update in progress.
+
+    :param models: the members
+    :param callbacks: their callbacks (``_setup_learn``'s)
+    :param totals: their ``total_timesteps`` (``_setup_learn``'s)
+    :param log_interval: ``learn``'s
+    """
+
+    def __init__(
+        self, models: list[REINFORCE], callbacks: list[BaseCallback], totals: list[int], log_interval: int | None
+    ) -> None:
+        self.models, self.callbacks, self.totals, self.log_interval = models, callbacks, totals, log_interval
+        self.errors: dict[int, ValueError] = {}
+        self.stopped: set[int] = set()
+        #: each member's rollouts so far (``time/iterations``)
+        self.iterations = [0] * len(models)
+        #: each member's rollout in progress: its steps and episodes so far (None: none open)
+        self.rollouts: list[list[int] | None] = [None] * len(models)
+        self.updates: dict[int, _MemberUpdate] = {}
+        self.trainer = _LockstepTrainer(models)
+
+    def run(self) -> None:
+        """Train until every member has taken its env steps (or stopped)."""
+        while True:
+            stepping = self._stepping()
+            if not stepping and not self.updates:
+                return
+            if stepping:
+                cdf = softmax_cdf(self.trainer.logits())
+                for k in stepping:
+                    self._step(k, cdf[k])
+            for k in self.trainer.step(self.updates):
+                self.updates.pop(k).finish(self.models[k])
+                _dump(self.models[k], self.iterations[k], self.log_interval)
+
+    def _stepping(self) -> list[int]:
+        """:return: the members that take an env step now: not stopped, not updating, with a rollout open or to open"""
+        stepping = []
+        for k, model in enumerate(self.models):
+            if k in self.stopped or k in self.updates:
+                continue
+            if self.rollouts[k] is None:
+                if model.num_timesteps >= self.totals[k]:
+                    continue
+                model._start_rollout(self.callbacks[k])
+                self.rollouts[k] = [0, 0]
+            stepping.append(k)
+        return stepping
+
+    def _step(self, k: int, cdf: np.ndarray) -> None:
+        """
+        Member k's env step, and the end of its rollout and the start of its update when the rollout is complete
+        (``REINFORCE.learn``'s loop after ``collect_rollouts``).
+
+        :param k: the member
+        :param cdf: its cumulative probabilities (``softmax_cdf``), shape (n_envs, n_actions)
+        """
+        model, rollout = self.models[k], self.rollouts[k]
+        assert rollout is not None
+        try:
+            go_on = _env_step(model, self.callbacks[k], rollout, cdf)
+        except ValueError as error:
+            self.errors[k] = error
+            self.stopped.add(k)
+            return
+        if not go_on:
+            self.stopped.add(k)
+            return
+        if not model._rollout_complete(rollout[0], rollout[1]):
+            return
+        self.callbacks[k].on_rollout_end()
+        self.rollouts[k] = None
+        self.iterations[k] += 1
+        model._update_current_progress_remaining(model.num_timesteps, self.totals[k])
+        batch = model._start_update()
+        if batch is None:
+            _dump(model, self.iterations[k], self.log_interval)
+        else:
+            self.updates[k] = _MemberUpdate(model, batch)
+
+
+def _env_step(model: REINFORCE, callback: BaseCallback, rollout: list[int], cdf: np.ndarray) -> bool:
+    """
+    One env step of a member's rollout (``collect_rollouts``'s loop), its actions drawn from the stacked forward
+    pass's probabilities.
+
+    :param model: the member
+    :param callback: its callback
+    :param rollout: its rollout's steps and episodes so far, counted on here
+    :param cdf: its cumulative probabilities (``softmax_cdf``), shape (n_envs, n_actions)
+    :return: False if its callback stopped training
+    :raises ValueError: if its env returned NaN or ±inf
+    """
+    model._next_cdf = cdf
+    try:
+        go_on, n_ended = model._rollout_step(model.env, callback, model.rollout_buffer, rollout[0], rollout[1])  # type: ignore[arg-type]
+    finally:
+        model._next_cdf = None
+    rollout[0] += 1
+    rollout[1] += n_ended
+    return go_on
+
+
+def _refuse_save(*args: Any, **kwargs: Any) -> None:
+    """A member's ``save`` while its population trains it."""
+    raise RuntimeError(
+        "A member of a REINFORCEPopulation cannot be saved while the population's learn() runs (its Adam states are the "
+        "population's until then): save the members after learn() returns, or train the run alone to save checkpoints"
+    )
+
+
+def _dump(model: REINFORCE, iteration: int, log_interval: int | None) -> None:
+    """``REINFORCE.learn``'s dump after an update (every ``log_interval`` rollouts)."""
+    if log_interval is not None and iteration % log_interval == 0:
+        model.dump_logs(iteration)
+
+
+def _finish_learn(
+    models: list[REINFORCE],
+    callbacks: list[BaseCallback],
+    iterations: list[int],
+    errors: dict[int, ValueError],
+    log_interval: int | None,
+) -> None:
+    """
+    The end of ``learn`` for each member, as ``REINFORCE.learn`` ends (the last dump, ``on_training_end``), except for
+    the members stopped by an error, which end as a separate run that raised: then the error, naming them.
+    """
+    for k, (model, member_callback) in enumerate(zip(models, callbacks, strict=True)):
+        if k in errors:
+            continue
+        if log_interval is not None and model.logger.name_to_value:
+            model.dump_logs(iterations[k])
+        member_callback.on_training_end()
+    if errors:
+        first = min(errors)
+        names = ", ".join(f"{k} (seed {models[k].seed})" for k in sorted(errors))
+        raise ValueError(
+            f"REINFORCEPopulation.learn: member {names} stopped, each as its last update left it (the others trained "
+            f"to the end); member {first}'s error: {errors[first]}"
+        ) from errors[first]
+
+
+class _MemberUpdate:
+    """
+    A member's update in progress: its steps (``REINFORCE._start_update``'s batch), trained one chunk per stacked
+    gradient step (all of them at once in the batch mode, one at a time in the per-step mode), and what
+    ``_finish_update`` logs of them.
+
+    :param model: the member
+    :param batch: the update's steps
+    """
+
+    def __init__(self, model: REINFORCE, batch: TrainingBatch) -> None:
+        self.batch = batch
+        self.length = length = len(batch.targets)
+        self.observations = np.asarray(batch.observations, dtype=np.float32).reshape(length, -1)
+        self.actions = np.asarray(batch.actions).reshape(length)
+        self.returns = np.asarray(batch.targets, dtype=np.float32)
+        self.episode_steps = np.asarray(batch.episode_steps)
+        #: the chunks of steps, one per gradient step (``_update_slices``), and the next one
+        self.chunks = [(0, length)] if model.update_mode == "batch" else [(t, t + 1) for t in range(length)]
+        self.next = 0
+        #: α^θ and α^w of this update (set by ``_start_update``)
+        self.policy_lr = model.policy.optimizer.param_groups[0]["lr"]
+        value_optimizer = model.policy.value_optimizer
+        self.value_lr = 0.0 if value_optimizer is None else value_optimizer.param_groups[0]["lr"]
+        #: each gradient step's policy, entropy and value losses, and v̂(S_t) before the steps
+        self.losses: list[tuple[float, float, float]] = []
+        self.values: list[np.ndarray] = []
+
+    def finish(self, model: REINFORCE) -> None:
+        """``REINFORCE._finish_update`` with the update's losses and values."""
+        losses = th.tensor(self.losses, dtype=th.float32)
+        values = th.as_tensor(np.concatenate(self.values)) if model.use_baseline else None
+        model._finish_update(self.batch, losses[:, 0], losses[:, 1], losses[:, 2], values)
+
+
+class _StackedPart:
+    """
+    One network of every member (the policy network or the value network) as a ``StackedMLP`` shared with them, and
+    its ``StackedAdam`` loaded from the members' optimizers and handed back to them by ``close``.
+
+    :param networks: the members' networks, ``nn.Sequential`` of their ``nn.Linear`` layers and activations
+    :param optimizers: the members' optimizers of those parameters
+    :param name: the network's name in the errors
+    """
+
+    def __init__(self, networks: list[nn.Sequential], optimizers: list[th.optim.Optimizer], name: str) -> None:
+        self.networks = networks
+        self.optimizers = optimizers
+        self.stacked = StackedMLP.from_sequentials(networks, name)
+        self.stacked.share_with(networks)
+        # Member k's own parameters, in the stacked parameters' order
+        self.member_parameters = [list(_linear_parameters(network)) for network in networks]
+        self.parameters = list(self.stacked.parameters())
+        group = optimizers[0].param_groups[0]
+        self.optimizer = StackedAdam(
+            self.parameters,
+            len(networks),
+            betas=group["betas"],
+            eps=group["eps"],
+            fused=group["fused"],
+            foreach=group["foreach"],
+        )
+        for k, optimizer in enumerate(optimizers):
+            state = optimizer.state
+            for index, parameter in enumerate(self.member_parameters[k]):
+                if parameter not in state:
+                    continue
+                self.optimizer.set_state(k, int(state[parameter]["step"]))
+                self.optimizer.exp_avgs[index][k].copy_(_to_stacked(state[parameter]["exp_avg"]))
+                self.optimizer.exp_avg_sqs[index][k].copy_(_to_stacked(state[parameter]["exp_avg_sq"]))
+
+    def close(self) -> None:
+        """Each member's parameters get storage of their own again, and its optimizer its slice's Adam state."""
+        StackedMLP.own_storage(self.networks)
+        steps = self.optimizer.steps
+        for k, optimizer in enumerate(self.optimizers):
+            if steps[k] == 0:
+                continue
+            for index, parameter in enumerate(self.member_parameters[k]):
+                exp_avg = _to_member(self.optimizer.exp_avgs[index][k], parameter)
+                exp_avg_sq = _to_member(self.optimizer.exp_avg_sqs[index][k], parameter)
+                optimizer.state[parameter] = {
+                    "step": th.tensor(float(steps[k]), dtype=th.float32, device=parameter.device),
+                    "exp_avg": exp_avg.clone(memory_format=th.contiguous_format),
+                    "exp_avg_sq": exp_avg_sq.clone(memory_format=th.contiguous_format),
+                }
+
+
+def _linear_parameters(network: nn.Sequential) -> list[th.Tensor]:
+    """:return: the weights and biases of the network's ``nn.Linear`` layers, in order (a stacked MLP's order)"""
+    parameters: list[th.Tensor] = []
+    for layer in network:
+        if isinstance(layer, nn.Linear):
+            parameters.append(layer.weight)
+            if layer.bias is not None:
+                parameters.append(layer.bias)
+    return parameters
+
+
+def _to_member(stacked_slice: th.Tensor, parameter: th.Tensor) -> th.Tensor:
+    # (K, in, out)[k] is the transposed (out, in) weight of nn.Linear; (K, 1, out)[k] the (out,) bias
+    return stacked_slice.T if parameter.dim() == 2 else stacked_slice[0]
+
+
+def _to_stacked(member_tensor: th.Tensor) -> th.Tensor:
+    return member_tensor.T if member_tensor.dim() == 2 else member_tensor.unsqueeze(0)
+
+
+def _policy_network(policy: REINFORCEPolicy) -> nn.Sequential:
+    """:return: π's layers, h(s, ·, θ) from the flat observation (``mlp_extractor.policy_net``, ``action_net``)"""
+    return nn.Sequential(*policy.mlp_extractor.policy_net, policy.action_net)
+
+
+def _value_network(policy: REINFORCEPolicy) -> nn.Sequential:
+    """:return: v̂'s layers, v̂(s, w) from the flat observation (``mlp_extractor.value_net``, ``value_net``)"""
+    return nn.Sequential(*policy.mlp_extractor.value_net, policy.value_net)
+
+
+class _LockstepTrainer:
+    """
+    The stacked networks of the members of one ``learn`` call: built from their weights, shared with them while they
+    live, handed back by ``close``.
+
+    :param models: the members
+    """
+
+    def __init__(self, models: list[REINFORCE]) -> None:
+        self.models = models
+        self.device = models[0].device
+        self.use_baseline = models[0].use_baseline
+        policies = [model.policy for model in models]
+        self.policy = _StackedPart([_policy_network(policy) for policy in policies], [p.optimizer for p in policies], "π")
+        self.value: _StackedPart | None = None
+        if self.use_baseline:
+            self.value = _StackedPart(
+                [_value_network(policy) for policy in policies],
+                [p.value_optimizer for p in policies],  # type: ignore[misc]
+                "v̂",
+            )
+        first = models[0]
+        self.features = int(np.prod(first.observation_space.shape or (1,)))
+        self.max_grad_norm = first.max_grad_norm
+        self.clip = self.max_grad_norm is not None and bool(np.isfinite(self.max_grad_norm))
+        self.gamma, self.gamma_t_factor = first.gamma, first.gamma_t_factor
+        self.normalize_advantage, self.ent_coef = first.normalize_advantage, first.ent_coef
+        self._all = th.arange(len(models), device=self.device)
+        #: every member's current observations, flattened, refilled at each env step (one array, no stacking)
+        self._observations = np.zeros((len(models), first.n_envs, self.features), dtype=np.float32)
+
+    def logits(self) -> np.ndarray:
+        """:return: h(S, ·, θ) of every member's current observations, one stacked forward pass, (K, n_envs, n_actions)"""
+        observations = self._observations
+        for k, model in enumerate(self.models):
+            observations[k] = np.reshape(model._last_obs, observations.shape[1:])  # type: ignore[arg-type]
+        with th.no_grad():
+            return self.policy.stacked(th.as_tensor(observations, device=self.device)).cpu().numpy()
+
+    def step(self, updates: dict[int, _MemberUpdate]) -> list[int]:
+        """
+        One stacked gradient step of each network: every member with an update in progress takes the gradient step
+        of its next chunk (``REINFORCE.train``: its whole batch, or its next step in time order); the others are not
+        stepped.
+
+        :param updates: the members' updates in progress, by member
+        :return: the members whose update this step finished
+        """
+        if not updates:
+            return []
+        members = sorted(updates)
+        chunks = [updates[k].chunks[updates[k].next] for k in members]
+        lengths = np.array([stop - start for start, stop in chunks])
+        n_members, width = len(members), int(lengths.max())
+        x = np.zeros((n_members, width, self.features), dtype=np.float32)
+        actions = np.zeros((n_members, width), dtype=np.int64)
+        returns = np.zeros((n_members, width), dtype=np.float32)
+        episode_steps = np.zeros((n_members, width), dtype=np.int64)
+        for row, (k, (start, stop)) in enumerate(zip(members, chunks, strict=True)):
+            update, n = updates[k], stop - start
+            x[row, :n] = update.observations[start:stop]
+            actions[row, :n] = update.actions[start:stop]
+            returns[row, :n] = update.returns[start:stop]
+            episode_steps[row, :n] = update.episode_steps[start:stop]
+        policy_lrs = np.zeros(len(self.models))
+        value_lrs = np.zeros(len(self.models))
+        for k in members:
+            policy_lrs[k], value_lrs[k] = updates[k].policy_lr, updates[k].value_lr
+        losses, values = self._gradient_step(
+            x, actions, returns, episode_steps, lengths, np.array(members), policy_lrs, value_lrs
+        )
+        finished = []
+        for row, k in enumerate(members):
+            update = updates[k]
+            update.losses.append((losses[0][row], losses[1][row], losses[2][row]))
+            update.values.append(values[row, : lengths[row]])
+            update.next += 1
+            if update.next == len(update.chunks):
+                finished.append(k)
+        return finished
+
+    def _gradient_step(
+        self,
+        x: np.ndarray,
+        actions: np.ndarray,
+        returns: np.ndarray,
+        episode_steps: np.ndarray,
+        lengths: np.ndarray,
+        members: np.ndarray,
+        policy_lrs: np.ndarray,
+        value_lrs: np.ndarray,
+    ) -> tuple[list[list[float]], np.ndarray]:
+        """
+        One gradient step of each network of the given members, each on the mean over its own chunk of steps
+        (``REINFORCE._gradient_step``), the chunks padded to the longest.
+
+        :param x: S_t of each given member, padded with zeros, shape (M, B, features)
+        :param actions: A_t, shape (M, B)
+        :param returns: G_t, shape (M, B)
+        :param episode_steps: t, shape (M, B)
+        :param lengths: each member's steps in its chunk (the rest is padding), shape (M,)
+        :param members: the members, shape (M,), ascending
+        :param policy_lrs: every member's α^θ, shape (K,)
+        :param value_lrs: every member's α^w, shape (K,)
+        :return: each member's policy, entropy and value losses (three lists of M), and v̂(S_t) before the step
+            (zeros without a baseline), shape (M, B)
+        """
+        device = self.device
+        index = self._all if len(members) == len(self.models) else th.as_tensor(members, device=device)
+        subset = None if len(members) == len(self.models) else index
+        obs = th.as_tensor(x, device=device)
+        returns_t = th.as_tensor(returns, device=device)
+        lengths_t = th.as_tensor(lengths, device=device)
+        valid = th.arange(x.shape[1], device=device) < lengths_t[:, None]
+        # Each member's mean over its own steps: weight 1/T_k on its steps, 0 on the padding
+        weights = valid / lengths_t[:, None]
+        log_probs = F.log_softmax(self.policy.stacked(obs, subset), dim=-1)
+        log_prob = log_probs.gather(2, th.as_tensor(actions, device=device).unsqueeze(-1)).squeeze(-1)
+        entropy = -(log_probs.exp() * log_probs).sum(-1)
+        values = th.zeros_like(returns_t) if self.value is None else self.value.stacked(obs, subset).squeeze(-1)
+        # δ_t = G_t − v̂(S_t, w) (S&B §13.4), from w before this step's update; plain REINFORCE: δ_t = G_t (§13.3)
+        advantages = returns_t - values.detach()
+        policy_weights = advantages
+        if self.normalize_advantage:
+            # Standardised over each member's own batch (with torch's unbiased std), where it has more than one step
+            mean = (advantages * weights).sum(1, keepdim=True)
+            spread = ((advantages - mean) ** 2 * valid).sum(1, keepdim=True) / (lengths_t[:, None] - 1).clamp(min=1)
+            normalized = (advantages - mean) / (spread.sqrt() + 1e-8)
+            policy_weights = th.where(lengths_t[:, None] > 1, normalized, advantages)
+        if self.gamma_t_factor:
+            policy_weights = policy_weights * self.gamma ** th.as_tensor(episode_steps, device=device)
+        # θ ← θ + α^θ γ^t δ_t ∇ln π(A_t|S_t, θ) (S&B §13.4, eq. 13.11; eq. 13.8 with b = 0), each member's mean
+        policy_loss = -(policy_weights * log_prob * weights).sum(1)
+        # w ← w + α^w δ_t ∇v̂(S_t, w) (S&B §13.4): the gradient of ½ δ_t²
+        value_loss = 0.5 * ((returns_t - values) ** 2 * weights).sum(1)
+        entropy_loss = -(entropy * weights).sum(1)
+        loss = policy_loss + self.ent_coef * entropy_loss
+        if self.value is not None:
+            loss = loss + value_loss
+        # A sum over members: member k's parameters get its own loss's gradient only
+        parts = [self.policy] if self.value is None else [self.policy, self.value]
+        for part in parts:
+            part.optimizer.zero_grad()
+        loss.sum().backward()
+        for part, learning_rates in zip(parts, (policy_lrs, value_lrs), strict=False):
+            if self.clip:
+                clip_grad_norms_per_member(part.parameters, self.max_grad_norm)
+            part.optimizer.step(members, learning_rates)
+        losses = th.stack([policy_loss, entropy_loss, value_loss]).detach().cpu().tolist()
+        return losses, values.detach().cpu().numpy()
+
+    def close(self) -> None:
+        """Each member's parameters get storage of their own again, and its optimizers their slices' Adam states."""
+        self.policy.close()
+        if self.value is not None:
+            self.value.close()
+
+
+def check_members(models: Sequence[Any]) -> None:
+    """
+    :param models: the would-be members of a population
+    :raises ValueError: for no members, a model twice, members of different settings, without a seed or an env, or of
+        a setting not covered (actions other than Discrete, envs with action masks)
+    :raises TypeError: for a member that is not ``REINFORCE``, or networks or optimizers not covered
+    """
+    if len(models) == 0:
+        raise ValueError("models: a population needs at least one REINFORCE model")
+    if len({id(model) for model in models}) != len(models):
+        raise ValueError("models: a model appears more than once; build one REINFORCE model per seed")
+    for k, model in enumerate(models):
+        if not isinstance(model, REINFORCE):
+            raise TypeError(f"member {k} is a {type(model).__name__}: a population's members are REINFORCE models")
+        _check_member(k, model)
+        for name in SHARED_SETTINGS:
+            value, first = getattr(model, name), getattr(models[0], name)
+            if value != first:
+                raise ValueError(
+                    f"member {k}'s {name}={value!r} differs from member 0's ({first!r}): a population's members share one "
+                    "setting (every argument but seed and env); train members of other settings in a population of their own"
+                )
+    # (raises for layers a stacked network does not hold)
+    StackedMLP.from_sequentials([_policy_network(model.policy) for model in models], "π")
+    if models[0].use_baseline:
+        StackedMLP.from_sequentials([_value_network(model.policy) for model in models], "v̂")
+
+
+def _check_member(k: int, model: REINFORCE) -> None:
+    name = f"member {k} (seed {model.seed})"
+    if model.seed is None:
+        raise ValueError(f"member {k}: seed=None; build each member with a seed of its own (REINFORCE(..., seed=k))")
+    if model.env is None:
+        raise ValueError(f"{name} has no env to train on: build it with one, or call model.set_env(env) first")
+    if not isinstance(model.action_space, spaces.Discrete):
+        raise ValueError(
+            f"{name}: action_space={model.action_space}: a population draws Discrete actions from its stacked logits; "
+            "train Box, MultiDiscrete and MultiBinary models one after the other (model.learn)"
+        )
+    if is_masking_supported(model.env):
+        raise ValueError(
+            f"{name}: its env has action_masks(), and a population trains without masks: train masked models one after "
+            "the other (model.learn), or pass envs without the masks (no ActionMasker) to train unmasked"
+        )
+    policy = model.policy
+    extractors = {policy.pi_features_extractor, policy.vf_features_extractor}
+    if any(type(extractor) is not FlattenExtractor for extractor in extractors) or is_image_space(model.observation_space):
+        names = sorted({type(extractor).__name__ for extractor in extractors})
+        raise TypeError(
+            f"{name}: features_extractor={', '.join(names)} over {model.observation_space}: a population stacks MLPs over "
+            "flat Box observations ('MlpPolicy'); train CNN and Dict (MultiInputPolicy) models one after the other "
+            "(model.learn)"
+        )
+    if type(policy) is not REINFORCEPolicy or policy._own_forward or not policy._sb3_distribution:
+        raise TypeError(
+            f"{name}: policy {type(policy).__name__} with its own forward, distribution or layers: a population stacks "
+            "REINFORCEPolicy's ('MlpPolicy') networks; train this one alone (model.learn)"
+        )
+    networks = {"optimizer": _policy_network(policy), "value_optimizer": _value_network(policy)}
+    # (raises for layers a stacked network does not hold)
+    StackedMLP.from_sequentials([networks["optimizer"]], f"{name}'s π")
+    if model.use_baseline:
+        StackedMLP.from_sequentials([networks["value_optimizer"]], f"{name}'s v̂")
+    optimizers = {"optimizer": policy.optimizer, "value_optimizer": policy.value_optimizer}
+    for key, optimizer in optimizers.items():
+        if optimizer is None:
+            continue
+        group = optimizer.param_groups[0]
+        if type(optimizer) is not th.optim.Adam or group["weight_decay"] or group["amsgrad"] or group["maximize"]:
+            raise TypeError(
+                f"{name}: policy.{key} {type(optimizer).__name__} with weight_decay={group.get('weight_decay')!r}, "
+                f"amsgrad={group.get('amsgrad')!r}, maximize={group.get('maximize')!r}: a population's optimizers are "
+                "Adam without weight decay, AMSGrad or maximize (StackedAdam); leave optimizer_class and those kwargs out"
+            )
+        trained = {id(parameter) for group in optimizer.param_groups for parameter in group["params"]}
+        stacked = {id(parameter) for parameter in _linear_parameters(networks[key])}
+        if len(optimizer.param_groups) != 1 or trained != stacked:
+            raise TypeError(
+                f"{name}: policy.{key} trains other parameters than its network's linear layers (a features extractor "
+                "with parameters, or parameter groups of its own): a population trains the stacked layers only; train "
+                "this one alone (model.learn)"
+            )
+
+
+__all__ = ["REINFORCEPopulation", "check_members"]
