@@ -9,11 +9,12 @@ from typing import Any
 import pandas as pd
 import pytest
 
+from sb3_classic.common.population import MemberError
 from sb3_classic.harness import common, lockstep, runner
 from sb3_classic.harness.common import RunSpec
 from sb3_classic.harness.lockstep import lockstep_jobs, plan_lockstep, refusal
 from sb3_classic.harness.runner import RunError, RunResult, execute_population
-from sb3_classic.sarsa.lockstep import MemberError, NStepSARSAPopulation
+from sb3_classic.sarsa.lockstep import NStepSARSAPopulation
 
 #: A per-step NStepSARSA setting a population covers, small enough to train in a second
 PER_STEP = (

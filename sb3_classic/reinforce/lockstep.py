@@ -15,7 +15,17 @@ from torch import nn
 
 from sb3_classic.common.buffers import TrainingBatch
 from sb3_classic.common.masking import is_masking_supported
-from sb3_classic.common.stacked import StackedAdam, StackedMLP, clip_grad_norms_per_member
+from sb3_classic.common.population import (
+    StackedPart,
+    check_population,
+    dump,
+    finish_learn,
+    linear_parameters,
+    member_rng,
+    per_member_callbacks,
+    refusing_save,
+)
+from sb3_classic.common.stacked import StackedMLP, clip_grad_norms_per_member
 from sb3_classic.common.utils import check_positive_int
 from sb3_classic.reinforce.policies import REINFORCEPolicy
 from sb3_classic.reinforce.reinforce import REINFORCE, softmax_cdf
@@ -100,7 +110,7 @@ class REINFORCEPopulation:
         check_members(models)
         self.models = list(models)
         #: each member's generator of its action draws
-        self.action_rngs = [np.random.default_rng(np.random.SeedSequence(model.seed, spawn_key=(0,))) for model in self.models]
+        self.action_rngs = [member_rng(model.seed) for model in self.models]
 
     def learn(
         self,
@@ -124,11 +134,7 @@ class REINFORCEPopulation:
             that member stops as its last update left it, the others train to the end first
         """
         models = self.models
-        callbacks: list[MaybeCallback] = [None] * len(models) if callback is None else list(callback)
-        if len(callbacks) != len(models):
-            raise ValueError(
-                f"callback: {len(callbacks)} callbacks for {len(models)} members: pass one per member (None for none)"
-            )
+        callbacks = per_member_callbacks(callback, len(models))
         if log_interval is not None:
             check_positive_int("log_interval", log_interval, hint="Pass the updates between two logger dumps, or None")
         for model in models:
@@ -149,7 +155,7 @@ class REINFORCEPopulation:
                 model._action_rng = rng
                 # A member's optimizers are not stepped while the population trains it (the StackedAdams are): a file
                 # saved now would hold a stale Adam state, so saving waits until learn returns
-                model.__dict__["save"] = _refuse_save
+                model.__dict__["save"] = refusing_save("REINFORCEPopulation")
             run.run()
         finally:
             run.trainer.close()
@@ -157,7 +163,7 @@ class REINFORCEPopulation:
                 model._action_rng = None
                 model._next_cdf = None
                 model.__dict__.pop("save", None)
-        _finish_learn(models, member_callbacks, run.iterations, run.errors, log_interval)
+        finish_learn("REINFORCEPopulation", models, member_callbacks, run.iterations, run.errors, log_interval)
         return models
 
 
@@ -198,7 +204,7 @@ class _LockstepRun:
                     self._step(k, cdf[k])
             for k in self.trainer.step(self.updates):
                 self.updates.pop(k).finish(self.models[k])
-                _dump(self.models[k], self.iterations[k], self.log_interval)
+                dump(self.models[k], self.iterations[k], self.log_interval)
 
     def _stepping(self) -> list[int]:
         """:return: the members that take an env step now: not stopped, not updating, with a rollout open or to open"""
@@ -241,7 +247,7 @@ class _LockstepRun:
         model._update_current_progress_remaining(model.num_timesteps, self.totals[k])
         batch = model._start_update()
         if batch is None:
-            _dump(model, self.iterations[k], self.log_interval)
+            dump(model, self.iterations[k], self.log_interval)
         else:
             self.updates[k] = _MemberUpdate(model, batch)
 
@@ -266,46 +272,6 @@ def _env_step(model: REINFORCE, callback: BaseCallback, rollout: list[int], cdf:
     rollout[0] += 1
     rollout[1] += n_ended
     return go_on
-
-
-def _refuse_save(*args: Any, **kwargs: Any) -> None:
-    """A member's ``save`` while its population trains it."""
-    raise RuntimeError(
-        "A member of a REINFORCEPopulation cannot be saved while the population's learn() runs (its Adam states are the "
-        "population's until then): save the members after learn() returns, or train the run alone to save checkpoints"
-    )
-
-
-def _dump(model: REINFORCE, iteration: int, log_interval: int | None) -> None:
-    """``REINFORCE.learn``'s dump after an update (every ``log_interval`` rollouts)."""
-    if log_interval is not None and iteration % log_interval == 0:
-        model.dump_logs(iteration)
-
-
-def _finish_learn(
-    models: list[REINFORCE],
-    callbacks: list[BaseCallback],
-    iterations: list[int],
-    errors: dict[int, ValueError],
-    log_interval: int | None,
-) -> None:
-    """
-    The end of ``learn`` for each member, as ``REINFORCE.learn`` ends (the last dump, ``on_training_end``), except for
-    the members stopped by an error, which end as a separate run that raised: then the error, naming them.
-    """
-    for k, (model, member_callback) in enumerate(zip(models, callbacks, strict=True)):
-        if k in errors:
-            continue
-        if log_interval is not None and model.logger.name_to_value:
-            model.dump_logs(iterations[k])
-        member_callback.on_training_end()
-    if errors:
-        first = min(errors)
-        names = ", ".join(f"{k} (seed {models[k].seed})" for k in sorted(errors))
-        raise ValueError(
-            f"REINFORCEPopulation.learn: member {names} stopped, each as its last update left it (the others trained "
-            f"to the end); member {first}'s error: {errors[first]}"
-        ) from errors[first]
 
 
 class _MemberUpdate:
@@ -343,79 +309,6 @@ class _MemberUpdate:
         model._finish_update(self.batch, losses[:, 0], losses[:, 1], losses[:, 2], values)
 
 
-class _StackedPart:
-    """
-    One network of every member (the policy network or the value network) as a ``StackedMLP`` shared with them, and
-    its ``StackedAdam`` loaded from the members' optimizers and handed back to them by ``close``.
-
-    :param networks: the members' networks, ``nn.Sequential`` of their ``nn.Linear`` layers and activations
-    :param optimizers: the members' optimizers of those parameters
-    :param name: the network's name in the errors
-    """
-
-    def __init__(self, networks: list[nn.Sequential], optimizers: list[th.optim.Optimizer], name: str) -> None:
-        self.networks = networks
-        self.optimizers = optimizers
-        self.stacked = StackedMLP.from_sequentials(networks, name)
-        self.stacked.share_with(networks)
-        # Member k's own parameters, in the stacked parameters' order
-        self.member_parameters = [list(_linear_parameters(network)) for network in networks]
-        self.parameters = list(self.stacked.parameters())
-        group = optimizers[0].param_groups[0]
-        self.optimizer = StackedAdam(
-            self.parameters,
-            len(networks),
-            betas=group["betas"],
-            eps=group["eps"],
-            fused=group["fused"],
-            foreach=group["foreach"],
-        )
-        for k, optimizer in enumerate(optimizers):
-            state = optimizer.state
-            for index, parameter in enumerate(self.member_parameters[k]):
-                if parameter not in state:
-                    continue
-                self.optimizer.set_state(k, int(state[parameter]["step"]))
-                self.optimizer.exp_avgs[index][k].copy_(_to_stacked(state[parameter]["exp_avg"]))
-                self.optimizer.exp_avg_sqs[index][k].copy_(_to_stacked(state[parameter]["exp_avg_sq"]))
-
-    def close(self) -> None:
-        """Each member's parameters get storage of their own again, and its optimizer its slice's Adam state."""
-        StackedMLP.own_storage(self.networks)
-        steps = self.optimizer.steps
-        for k, optimizer in enumerate(self.optimizers):
-            if steps[k] == 0:
-                continue
-            for index, parameter in enumerate(self.member_parameters[k]):
-                exp_avg = _to_member(self.optimizer.exp_avgs[index][k], parameter)
-                exp_avg_sq = _to_member(self.optimizer.exp_avg_sqs[index][k], parameter)
-                optimizer.state[parameter] = {
-                    "step": th.tensor(float(steps[k]), dtype=th.float32, device=parameter.device),
-                    "exp_avg": exp_avg.clone(memory_format=th.contiguous_format),
-                    "exp_avg_sq": exp_avg_sq.clone(memory_format=th.contiguous_format),
-                }
-
-
-def _linear_parameters(network: nn.Sequential) -> list[th.Tensor]:
-    """:return: the weights and biases of the network's ``nn.Linear`` layers, in order (a stacked MLP's order)"""
-    parameters: list[th.Tensor] = []
-    for layer in network:
-        if isinstance(layer, nn.Linear):
-            parameters.append(layer.weight)
-            if layer.bias is not None:
-                parameters.append(layer.bias)
-    return parameters
-
-
-def _to_member(stacked_slice: th.Tensor, parameter: th.Tensor) -> th.Tensor:
-    # (K, in, out)[k] is the transposed (out, in) weight of nn.Linear; (K, 1, out)[k] the (out,) bias
-    return stacked_slice.T if parameter.dim() == 2 else stacked_slice[0]
-
-
-def _to_stacked(member_tensor: th.Tensor) -> th.Tensor:
-    return member_tensor.T if member_tensor.dim() == 2 else member_tensor.unsqueeze(0)
-
-
 def _policy_network(policy: REINFORCEPolicy) -> nn.Sequential:
     """:return: π's layers, h(s, ·, θ) from the flat observation (``mlp_extractor.policy_net``, ``action_net``)"""
     return nn.Sequential(*policy.mlp_extractor.policy_net, policy.action_net)
@@ -439,13 +332,15 @@ class _LockstepTrainer:
         self.device = models[0].device
         self.use_baseline = models[0].use_baseline
         policies = [model.policy for model in models]
-        self.policy = _StackedPart([_policy_network(policy) for policy in policies], [p.optimizer for p in policies], "π")
-        self.value: _StackedPart | None = None
+        networks = [_policy_network(policy) for policy in policies]
+        self.policy = StackedPart(networks, [policy.optimizer for policy in policies], "π", self.device)
+        self.value: StackedPart | None = None
         if self.use_baseline:
-            self.value = _StackedPart(
+            self.value = StackedPart(
                 [_value_network(policy) for policy in policies],
-                [p.value_optimizer for p in policies],  # type: ignore[misc]
+                [policy.value_optimizer for policy in policies],  # type: ignore[misc]
                 "v̂",
+                self.device,
             )
         first = models[0]
         self.features = int(np.prod(first.observation_space.shape or (1,)))
@@ -591,21 +486,7 @@ def check_members(models: Sequence[Any]) -> None:
         a setting not covered (actions other than Discrete, envs with action masks)
     :raises TypeError: for a member that is not ``REINFORCE``, or networks or optimizers not covered
     """
-    if len(models) == 0:
-        raise ValueError("models: a population needs at least one REINFORCE model")
-    if len({id(model) for model in models}) != len(models):
-        raise ValueError("models: a model appears more than once; build one REINFORCE model per seed")
-    for k, model in enumerate(models):
-        if not isinstance(model, REINFORCE):
-            raise TypeError(f"member {k} is a {type(model).__name__}: a population's members are REINFORCE models")
-        _check_member(k, model)
-        for name in SHARED_SETTINGS:
-            value, first = getattr(model, name), getattr(models[0], name)
-            if value != first:
-                raise ValueError(
-                    f"member {k}'s {name}={value!r} differs from member 0's ({first!r}): a population's members share one "
-                    "setting (every argument but seed and env); train members of other settings in a population of their own"
-                )
+    check_population(models, REINFORCE, SHARED_SETTINGS, _check_member)
     # (raises for layers a stacked network does not hold)
     StackedMLP.from_sequentials([_policy_network(model.policy) for model in models], "π")
     if models[0].use_baseline:
@@ -614,15 +495,12 @@ def check_members(models: Sequence[Any]) -> None:
 
 def _check_member(k: int, model: REINFORCE) -> None:
     name = f"member {k} (seed {model.seed})"
-    if model.seed is None:
-        raise ValueError(f"member {k}: seed=None; build each member with a seed of its own (REINFORCE(..., seed=k))")
-    if model.env is None:
-        raise ValueError(f"{name} has no env to train on: build it with one, or call model.set_env(env) first")
     if not isinstance(model.action_space, spaces.Discrete):
         raise ValueError(
             f"{name}: action_space={model.action_space}: a population draws Discrete actions from its stacked logits; "
             "train Box, MultiDiscrete and MultiBinary models one after the other (model.learn)"
         )
+    assert model.env is not None, "check_population checked it"
     if is_masking_supported(model.env):
         raise ValueError(
             f"{name}: its env has action_masks(), and a population trains without masks: train masked models one after "
@@ -659,7 +537,7 @@ def _check_member(k: int, model: REINFORCE) -> None:
                 "Adam without weight decay, AMSGrad or maximize (StackedAdam); leave optimizer_class and those kwargs out"
             )
         trained = {id(parameter) for group in optimizer.param_groups for parameter in group["params"]}
-        stacked = {id(parameter) for parameter in _linear_parameters(networks[key])}
+        stacked = {id(parameter) for parameter in linear_parameters(networks[key])}
         if len(optimizer.param_groups) != 1 or trained != stacked:
             raise TypeError(
                 f"{name}: policy.{key} trains other parameters than its network's linear layers (a features extractor "

@@ -11,10 +11,18 @@ from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.torch_layers import FlattenExtractor
 from stable_baselines3.common.type_aliases import MaybeCallback
 from stable_baselines3.dqn.policies import QNetwork
-from torch import nn
 
 from sb3_classic.common.buffers import TrainingBatch
-from sb3_classic.common.stacked import StackedAdam, StackedMLP, clip_grad_norms_per_member
+from sb3_classic.common.population import (
+    StackedPart,
+    check_population,
+    dump,
+    finish_learn,
+    member_rng,
+    per_member_callbacks,
+    refusing_save,
+)
+from sb3_classic.common.stacked import StackedMLP, clip_grad_norms_per_member
 from sb3_classic.common.utils import check_positive_int
 from sb3_classic.sarsa.nstep_sarsa import LOG_EVERY_STEPS, NStepSARSA
 from sb3_classic.sarsa.policies import LinearQPolicy
@@ -104,7 +112,7 @@ class NStepSARSAPopulation:
         check_members(models)
         self.models = list(models)
         #: each member's generator of its behaviour policy's draws
-        self.action_rngs = [np.random.default_rng(np.random.SeedSequence(model.seed, spawn_key=(0,))) for model in self.models]
+        self.action_rngs = [member_rng(model.seed) for model in self.models]
 
     def learn(
         self,
@@ -127,11 +135,7 @@ class NStepSARSAPopulation:
             that member stops as its last update left it, the others train to the end first
         """
         models = self.models
-        callbacks: list[MaybeCallback] = [None] * len(models) if callback is None else list(callback)
-        if len(callbacks) != len(models):
-            raise ValueError(
-                f"callback: {len(callbacks)} callbacks for {len(models)} members: pass one per member (None for none)"
-            )
+        callbacks = per_member_callbacks(callback, len(models))
         if log_interval == "auto":
             log_interval = -(-LOG_EVERY_STEPS // models[0].train_freq)
         if log_interval is not None:
@@ -156,7 +160,7 @@ class NStepSARSAPopulation:
                 model._setup_masking(False)
                 # A member's optimizer is not stepped while the population trains it (StackedAdam is): a file saved now
                 # would hold a stale Adam state, so saving waits until learn returns
-                model.__dict__["save"] = _refuse_save
+                model.__dict__["save"] = refusing_save("NStepSARSAPopulation")
             # A member's update trains its transitions one stacked step at a time, while the others go on with their
             # env steps and updates: each member makes the updates of its separate run in the same order. Between two
             # stacked steps, every member without an update in progress takes env steps (one stacked forward pass
@@ -177,27 +181,14 @@ class NStepSARSAPopulation:
                 for k in trainer.step(updates):
                     update = updates.pop(k)
                     models[k]._finish_update(update.batch, update.n_chunks, update.q_first, update.losses)
-                    _dump(models[k], iterations[k], log_interval)
+                    dump(models[k], iterations[k], log_interval)
         finally:
             trainer.close()
             for model in models:
                 model._action_rng = None
                 model.__dict__.pop("save", None)
-        _finish_learn(models, member_callbacks, iterations, errors, log_interval)
+        finish_learn("NStepSARSAPopulation", models, member_callbacks, iterations, errors, log_interval)
         return models
-
-
-class MemberError(ValueError):
-    """
-    Members of a population stopped by an error of their own (their env's NaN), the others trained to the end.
-
-    :param message: what happened, naming the members
-    :param member_errors: each stopped member's error, by member index
-    """
-
-    def __init__(self, message: str, member_errors: dict[int, ValueError]) -> None:
-        super().__init__(message)
-        self.member_errors = member_errors
 
 
 def _env_steps(
@@ -249,44 +240,9 @@ def _env_steps(
             if batch is not None:
                 updates[k] = _MemberUpdate(batch, model._update_slices(len(batch.targets)), model.gradient_steps)
                 continue
-            _dump(model, iterations[k], log_interval)
+            dump(model, iterations[k], log_interval)
             if model.num_timesteps < totals[k]:
                 ready.append(k)
-
-
-def _refuse_save(*args: Any, **kwargs: Any) -> None:
-    """A member's ``save`` while its population trains it."""
-    raise RuntimeError(
-        "A member of an NStepSARSAPopulation cannot be saved while the population's learn() runs (its Adam state is the "
-        "population's until then): save the members after learn() returns, or train the run alone to save checkpoints"
-    )
-
-
-def _finish_learn(
-    models: list[NStepSARSA],
-    callbacks: list[BaseCallback],
-    iterations: list[int],
-    errors: dict[int, ValueError],
-    log_interval: int | None,
-) -> None:
-    """
-    The end of ``learn`` for each member, as ``NStepSARSA.learn`` ends (the last dump, ``on_training_end``), except for
-    the members stopped by an error, which end as a separate run that raised: then the error, naming them.
-    """
-    for k, (model, member_callback) in enumerate(zip(models, callbacks, strict=True)):
-        if k in errors:
-            continue
-        if log_interval is not None and model.logger.name_to_value:
-            model.dump_logs(iterations[k])
-        member_callback.on_training_end()
-    if errors:
-        first = min(errors)
-        names = ", ".join(f"{k} (seed {models[k].seed})" for k in sorted(errors))
-        raise MemberError(
-            f"NStepSARSAPopulation.learn: member {names} stopped, each as its last update left it (the others trained "
-            f"to the end); member {first}'s error: {errors[first]}",
-            errors,
-        ) from errors[first]
 
 
 class _Rollout:
@@ -375,12 +331,6 @@ class _MemberUpdate:
         return self.chunks[self.round % self.n_chunks]
 
 
-def _dump(model: NStepSARSA, iteration: int, log_interval: int | None) -> None:
-    """``NStepSARSA.learn``'s dump after an update (every ``log_interval`` rollouts)."""
-    if log_interval is not None and iteration % log_interval == 0:
-        model.dump_logs(iteration)
-
-
 class _LockstepTrainer:
     """
     The stacked q̂ of the members of one ``learn`` call: built from their weights, shared with them while it lives,
@@ -391,71 +341,25 @@ class _LockstepTrainer:
 
     def __init__(self, models: list[NStepSARSA]) -> None:
         self.models = models
-        self.networks: list[nn.Sequential] = [model.policy.q_net.q_net for model in models]
-        self.stacked = StackedMLP.from_sequentials(self.networks)
         device = models[0].device
-        self.stacked.to(device)
         self.device = device
-        self.stacked.share_with(self.networks)
+        self.q = StackedPart(
+            [model.policy.q_net.q_net for model in models], [model.policy.optimizer for model in models], "q̂", device
+        )
+        self.stacked, self.parameters = self.q.stacked, self.q.parameters
+        self.optimizer = self.q.optimizer
         # The copies of q̂ (bootstrap network, weight average) stacked as q̂ is, each member's copy a view of its slice:
         # its own code reads and moves them (its targets' bootstrap values, _move_copies' Polyak updates) as in its
         # separate run, on its slice only
-        self.copies: list[tuple[StackedMLP, list[nn.Sequential]]] = []
-        for name in ("q_net_target", "q_net_average"):
-            if getattr(models[0].policy, name) is not None:
-                copies = [getattr(model.policy, name).q_net for model in models]
-                stacked_copy = StackedMLP.from_sequentials(copies)
-                stacked_copy.requires_grad_(False)
-                stacked_copy.to(device)
-                stacked_copy.share_with(copies)
-                self.copies.append((stacked_copy, copies))
-        # Member k's own parameters, in the stacked parameters' order, and how a stacked slice maps onto each
-        self.member_parameters: list[list[th.Tensor]] = []
-        for network in self.networks:
-            parameters: list[th.Tensor] = []
-            for layer in network:
-                if isinstance(layer, nn.Linear):
-                    parameters.append(layer.weight)
-                    if layer.bias is not None:
-                        parameters.append(layer.bias)
-            self.member_parameters.append(parameters)
-        self.parameters = list(self.stacked.parameters())
-        group = models[0].policy.optimizer.param_groups[0]
-        self.optimizer = StackedAdam(
-            self.parameters,
-            len(models),
-            betas=group["betas"],
-            eps=group["eps"],
-            fused=group["fused"],
-            foreach=group["foreach"],
-            # (the members' separate runs spend most of their Adam steps' time on denormal second moments)
-            flush_denormal=True,
-        )
-        self._load_adam_states()
+        self.copies = [
+            StackedPart([getattr(model.policy, name).q_net for model in models], None, name, device)
+            for name in ("q_net_target", "q_net_average")
+            if getattr(models[0].policy, name) is not None
+        ]
         #: the length of a flattened observation
         self.features = int(np.prod(models[0].observation_space.shape or (1,)))
         self.max_grad_norm = models[0].max_grad_norm
         self.huber = models[0].loss_function == "huber"
-
-    @staticmethod
-    def _to_member(stacked_slice: th.Tensor, parameter: th.Tensor) -> th.Tensor:
-        # (K, in, out)[k] is the transposed (out, in) weight of nn.Linear; (K, 1, out)[k] the (out,) bias
-        return stacked_slice.T if parameter.dim() == 2 else stacked_slice[0]
-
-    @staticmethod
-    def _to_stacked(member_tensor: th.Tensor) -> th.Tensor:
-        return member_tensor.T if member_tensor.dim() == 2 else member_tensor.unsqueeze(0)
-
-    def _load_adam_states(self) -> None:
-        """Start from each member's own Adam state (a member trained before goes on from its moments and step count)."""
-        for k, model in enumerate(self.models):
-            state = model.policy.optimizer.state
-            for index, parameter in enumerate(self.member_parameters[k]):
-                if parameter not in state:
-                    continue
-                self.optimizer.set_state(k, int(state[parameter]["step"]))
-                self.optimizer.exp_avgs[index][k].copy_(self._to_stacked(state[parameter]["exp_avg"]))
-                self.optimizer.exp_avg_sqs[index][k].copy_(self._to_stacked(state[parameter]["exp_avg_sq"]))
 
     def q_values(self) -> np.ndarray:
         """:return: q̂(S, ·) of every member's current observations, one stacked forward pass, (K, n_envs, n_actions)"""
@@ -553,22 +457,9 @@ class _LockstepTrainer:
 
     def close(self) -> None:
         """Each member's parameters get storage of their own again, and its optimizer its slice's Adam state."""
-        StackedMLP.own_storage(self.networks)
-        for _, copies in self.copies:
-            StackedMLP.own_storage(copies)
-        steps = self.optimizer.steps
-        for k, model in enumerate(self.models):
-            state = model.policy.optimizer.state
-            if steps[k] == 0:
-                continue
-            for index, parameter in enumerate(self.member_parameters[k]):
-                exp_avg = self._to_member(self.optimizer.exp_avgs[index][k], parameter)
-                exp_avg_sq = self._to_member(self.optimizer.exp_avg_sqs[index][k], parameter)
-                state[parameter] = {
-                    "step": th.tensor(float(steps[k]), dtype=th.float32, device=parameter.device),
-                    "exp_avg": exp_avg.clone(memory_format=th.contiguous_format),
-                    "exp_avg_sq": exp_avg_sq.clone(memory_format=th.contiguous_format),
-                }
+        self.q.close()
+        for copy in self.copies:
+            copy.close()
 
 
 def check_members(models: Sequence[Any]) -> None:
@@ -577,47 +468,13 @@ def check_members(models: Sequence[Any]) -> None:
     :raises ValueError: for no members, a model twice, members of different settings, or without a seed or an env
     :raises TypeError: for a member that is not ``NStepSARSA``, or a q̂ or optimizer not covered
     """
-    if len(models) == 0:
-        raise ValueError("models: a population needs at least one NStepSARSA model")
-    if len({id(model) for model in models}) != len(models):
-        raise ValueError("models: a model appears more than once; build one NStepSARSA model per seed")
-    for k, model in enumerate(models):
-        if not isinstance(model, NStepSARSA):
-            raise TypeError(f"member {k} is a {type(model).__name__}: a population's members are NStepSARSA models")
-        _check_member(k, model)
-        for name in SHARED_SETTINGS:
-            value, first = getattr(model, name), getattr(models[0], name)
-            if not same_setting(value, first):
-                raise ValueError(
-                    f"member {k}'s {name}={value!r} differs from member 0's ({first!r}): a population's members share one "
-                    "setting (every argument but seed and env); train members of other settings in a population of their own"
-                )
+    check_population(models, NStepSARSA, SHARED_SETTINGS, _check_member)
     # (raises for layers a stacked network does not hold)
     StackedMLP.from_sequentials([model.policy.q_net.q_net for model in models])
 
 
-#: The remaining progress at which two schedules are compared (``same_setting``)
-SCHEDULE_PROBES = (1.0, 0.75, 0.5, 0.25, 0.0)
-
-
-def same_setting(value: Any, other: Any) -> bool:
-    """
-    :param value: a member's setting (a number, a string, a dict, a space, an SB3 schedule)
-    :param other: another member's
-    :return: whether they are the same setting: equal, or two schedules (each member's own object, as rl-zoo3 builds
-        them) of the same values at the remaining progress 1, 0.75, 0.5, 0.25 and 0
-    """
-    if callable(value) and callable(other) and not isinstance(value, type):
-        return [float(value(p)) for p in SCHEDULE_PROBES] == [float(other(p)) for p in SCHEDULE_PROBES]
-    return bool(value == other)
-
-
 def _check_member(k: int, model: NStepSARSA) -> None:
     name = f"member {k} (seed {model.seed})"
-    if model.seed is None:
-        raise ValueError(f"member {k}: seed=None; build each member with a seed of its own (NStepSARSA(..., seed=k))")
-    if model.env is None:
-        raise ValueError(f"{name} has no env to train on: build it with one, or call model.set_env(env) first")
     policy = model.policy
     if isinstance(policy, LinearQPolicy):
         raise TypeError(
@@ -646,4 +503,4 @@ def _check_member(k: int, model: NStepSARSA) -> None:
         )
 
 
-__all__ = ["MemberError", "NStepSARSAPopulation", "check_members", "same_setting"]
+__all__ = ["NStepSARSAPopulation", "check_members"]

@@ -1,0 +1,261 @@
+"""
+What the populations of both algorithms share (``NStepSARSAPopulation``, ``REINFORCEPopulation``: K models of one
+setting trained in lockstep): the checks of their members, each member's generator of action draws, a network of every
+member stacked with its Adam state (``StackedPart``), and the end of ``learn`` for each member.
+"""
+
+from collections.abc import Callable, Sequence
+from typing import Any, cast
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.type_aliases import MaybeCallback
+from torch import nn
+
+from sb3_classic.common.stacked import StackedAdam, StackedMLP
+
+#: The remaining progress at which two schedules are compared (``same_setting``)
+SCHEDULE_PROBES = (1.0, 0.75, 0.5, 0.25, 0.0)
+
+
+class MemberError(ValueError):
+    """
+    Members of a population stopped by an error of their own (their env's NaN), the others trained to the end.
+
+    :param message: what happened, naming the members
+    :param member_errors: each stopped member's error, by member index
+    """
+
+    def __init__(self, message: str, member_errors: dict[int, ValueError]) -> None:
+        super().__init__(message)
+        self.member_errors = member_errors
+
+
+def member_rng(seed: int | None) -> np.random.Generator:
+    """
+    :param seed: a member's seed
+    :return: the generator of its behaviour policy's draws, ``default_rng(SeedSequence(seed, spawn_key=(0,)))``: its own,
+        not NumPy's global one, so that a member's draws do not depend on the other members (``check_population``
+        refuses a member without a seed)
+    """
+    assert seed is not None, "a population's members have seeds (check_population)"
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(0,)))
+
+
+def same_setting(value: Any, other: Any) -> bool:
+    """
+    :param value: a member's setting (a number, a string, a dict, a space, an SB3 schedule)
+    :param other: another member's
+    :return: whether they are the same setting: equal, or two schedules (each member's own object, as rl-zoo3 builds
+        them) of the same values at the remaining progress 1, 0.75, 0.5, 0.25 and 0
+    """
+    if callable(value) and callable(other) and not isinstance(value, type):
+        return [float(value(p)) for p in SCHEDULE_PROBES] == [float(other(p)) for p in SCHEDULE_PROBES]
+    return bool(value == other)
+
+
+def check_population(
+    models: Sequence[Any],
+    algorithm: type[BaseAlgorithm],
+    shared_settings: Sequence[str],
+    check_member: Callable[[int, Any], None],
+) -> None:
+    """
+    :param models: the would-be members of a population of ``algorithm``
+    :param algorithm: ``NStepSARSA`` or ``REINFORCE``
+    :param shared_settings: the attributes every member must share (``same_setting``)
+    :param check_member: the algorithm's checks of one member (its index, the model), raising for what is not covered
+    :raises ValueError: for no members, a model twice, a member without a seed or an env, or members of different
+        settings (and what ``check_member`` raises)
+    :raises TypeError: for a member that is not an ``algorithm`` model (and what ``check_member`` raises)
+    """
+    name = algorithm.__name__
+    if len(models) == 0:
+        raise ValueError(f"models: a population needs at least one {name} model")
+    if len({id(model) for model in models}) != len(models):
+        raise ValueError(f"models: a model appears more than once; build one {name} model per seed")
+    for k, model in enumerate(models):
+        if not isinstance(model, algorithm):
+            raise TypeError(f"member {k} is a {type(model).__name__}: a population's members are {name} models")
+        model = cast(Any, model)
+        if model.seed is None:
+            raise ValueError(f"member {k}: seed=None; build each member with a seed of its own ({name}(..., seed=k))")
+        if model.env is None:
+            raise ValueError(
+                f"member {k} (seed {model.seed}) has no env to train on: build it with one, or call model.set_env(env) first"
+            )
+        check_member(k, model)
+        for setting in shared_settings:
+            value, first = getattr(model, setting), getattr(models[0], setting)
+            if not same_setting(value, first):
+                raise ValueError(
+                    f"member {k}'s {setting}={value!r} differs from member 0's ({first!r}): a population's members share "
+                    "one setting (every argument but seed and env); train members of other settings in a population of "
+                    "their own"
+                )
+
+
+def per_member_callbacks(callback: Sequence[MaybeCallback] | None, n_members: int) -> list[MaybeCallback]:
+    """
+    :param callback: one callback (or None, or a list of them) per member, or None for none
+    :param n_members: the members
+    :return: one per member
+    :raises ValueError: for another count than one per member
+    """
+    callbacks: list[MaybeCallback] = [None] * n_members if callback is None else list(callback)
+    if len(callbacks) != n_members:
+        raise ValueError(f"callback: {len(callbacks)} callbacks for {n_members} members: pass one per member (None for none)")
+    return callbacks
+
+
+def refusing_save(population: str) -> Callable[..., None]:
+    """
+    :param population: the population's class name, for the message
+    :return: a member's ``save`` while its population trains it: a ``RuntimeError`` (its optimizers are not stepped
+        then, the population's are, so a file saved then would hold a stale Adam state)
+    """
+
+    def refuse_save(*args: Any, **kwargs: Any) -> None:
+        raise RuntimeError(
+            f"A member of a {population} cannot be saved while the population's learn() runs (its Adam state is the "
+            "population's until then): save the members after learn() returns, or train the run alone to save checkpoints"
+        )
+
+    return refuse_save
+
+
+def dump(model: Any, iteration: int, log_interval: int | None) -> None:
+    """The algorithm's ``learn``'s dump after an update (every ``log_interval`` rollouts)."""
+    if log_interval is not None and iteration % log_interval == 0:
+        model.dump_logs(iteration)
+
+
+def finish_learn(
+    population: str,
+    models: Sequence[Any],
+    callbacks: Sequence[BaseCallback],
+    iterations: Sequence[int],
+    errors: dict[int, ValueError],
+    log_interval: int | None,
+) -> None:
+    """
+    The end of ``learn`` for each member, as its algorithm's ``learn`` ends (the last dump, ``on_training_end``), except
+    for the members stopped by an error, which end as a separate run that raised: then the error, naming them.
+
+    :param population: the population's class name, for the message
+    :param models: the members
+    :param callbacks: their callbacks
+    :param iterations: their rollouts
+    :param errors: the stopped members' errors, by member
+    :param log_interval: ``learn``'s
+    :raises MemberError: if a member stopped, with every stopped member's error
+    """
+    for k, (model, member_callback) in enumerate(zip(models, callbacks, strict=True)):
+        if k in errors:
+            continue
+        if log_interval is not None and model.logger.name_to_value:
+            model.dump_logs(iterations[k])
+        member_callback.on_training_end()
+    if errors:
+        first = min(errors)
+        names = ", ".join(f"{k} (seed {models[k].seed})" for k in sorted(errors))
+        raise MemberError(
+            f"{population}.learn: member {names} stopped, each as its last update left it (the others trained to the end); "
+            f"member {first}'s error: {errors[first]}",
+            errors,
+        ) from errors[first]
+
+
+def linear_parameters(network: nn.Sequential) -> list[th.Tensor]:
+    """:return: the weights and biases of the network's ``nn.Linear`` layers, in order (a stacked MLP's order)"""
+    parameters: list[th.Tensor] = []
+    for layer in network:
+        if isinstance(layer, nn.Linear):
+            parameters.append(layer.weight)
+            if layer.bias is not None:
+                parameters.append(layer.bias)
+    return parameters
+
+
+def _to_member(stacked_slice: th.Tensor, parameter: th.Tensor) -> th.Tensor:
+    # (K, in, out)[k] is the transposed (out, in) weight of nn.Linear; (K, 1, out)[k] the (out,) bias
+    return stacked_slice.T if parameter.dim() == 2 else stacked_slice[0]
+
+
+def _to_stacked(member_tensor: th.Tensor) -> th.Tensor:
+    return member_tensor.T if member_tensor.dim() == 2 else member_tensor.unsqueeze(0)
+
+
+class StackedPart:
+    """
+    One network of every member (q̂, π or v̂) as a ``StackedMLP`` shared with them (each member's parameters views into
+    the stacked ones), and, for a trained network, its ``StackedAdam`` loaded from the members' optimizers (each
+    member's step count and moments) and handed back to them by ``close``.
+
+    :param networks: the members' networks, ``nn.Sequential`` of their ``nn.Linear`` layers and activations
+    :param optimizers: the members' Adam optimizers of those parameters; None: a network no optimizer trains (a copy of
+        q̂), without gradients
+    :param name: the network's name in the errors
+    :param device: where the stacked network lives
+    """
+
+    def __init__(
+        self, networks: list[nn.Sequential], optimizers: list[th.optim.Optimizer] | None, name: str, device: th.device
+    ) -> None:
+        self.networks = networks
+        self.optimizers = optimizers
+        self.stacked = StackedMLP.from_sequentials(networks, name)
+        self.stacked.to(device)
+        self.stacked.share_with(networks)
+        self.parameters = list(self.stacked.parameters())
+        # Member k's own parameters, in the stacked parameters' order
+        self.member_parameters = [linear_parameters(network) for network in networks]
+        self._optimizer: StackedAdam | None = None
+        if optimizers is None:
+            self.stacked.requires_grad_(False)
+            return
+        group = optimizers[0].param_groups[0]
+        self._optimizer = StackedAdam(
+            self.parameters,
+            len(networks),
+            betas=group["betas"],
+            eps=group["eps"],
+            fused=group["fused"],
+            foreach=group["foreach"],
+            # (separate runs spend most of their Adam steps' time on denormal second moments)
+            flush_denormal=True,
+        )
+        for k, optimizer in enumerate(optimizers):
+            state = optimizer.state
+            for index, parameter in enumerate(self.member_parameters[k]):
+                if parameter not in state:
+                    continue
+                self._optimizer.set_state(k, int(state[parameter]["step"]))
+                self._optimizer.exp_avgs[index][k].copy_(_to_stacked(state[parameter]["exp_avg"]))
+                self._optimizer.exp_avg_sqs[index][k].copy_(_to_stacked(state[parameter]["exp_avg_sq"]))
+
+    @property
+    def optimizer(self) -> StackedAdam:
+        """The ``StackedAdam`` of a trained network (a copy of q̂ has none)."""
+        assert self._optimizer is not None, "a network no optimizer trains has no StackedAdam"
+        return self._optimizer
+
+    def close(self) -> None:
+        """Each member's parameters get storage of their own again, and its optimizer its slice's Adam state."""
+        StackedMLP.own_storage(self.networks)
+        if self._optimizer is None or self.optimizers is None:
+            return
+        steps = self.optimizer.steps
+        for k, optimizer in enumerate(self.optimizers):
+            if steps[k] == 0:
+                continue
+            for index, parameter in enumerate(self.member_parameters[k]):
+                exp_avg = _to_member(self.optimizer.exp_avgs[index][k], parameter)
+                exp_avg_sq = _to_member(self.optimizer.exp_avg_sqs[index][k], parameter)
+                optimizer.state[parameter] = {
+                    "step": th.tensor(float(steps[k]), dtype=th.float32, device=parameter.device),
+                    "exp_avg": exp_avg.clone(memory_format=th.contiguous_format),
+                    "exp_avg_sq": exp_avg_sq.clone(memory_format=th.contiguous_format),
+                }
