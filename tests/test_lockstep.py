@@ -7,6 +7,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
+from sb3_contrib.common.wrappers import ActionMasker
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import VecEnv
@@ -309,6 +310,12 @@ def test_settings_not_covered_are_refused(kwargs: dict, message: str) -> None:
 def test_members_of_different_settings_are_refused() -> None:
     with pytest.raises(ValueError, match=r"member 1's n_steps=5 differs from member 0's \(4\)"):
         NStepSARSAPopulation([make_member(0), make_member(1, n_steps=5)])
+    # The stacked forward pass chooses over every action: an env with masks is refused, not trained unmasked
+    masked = make_vec_env(
+        "CartPole-v1", n_envs=1, seed=1, wrapper_class=ActionMasker, wrapper_kwargs=dict(action_mask_fn=lambda env: [1, 1])
+    )
+    with pytest.raises(ValueError, match=r"member 1 \(seed 1\): its env has action_masks\(\)"):
+        NStepSARSAPopulation([make_member(0), make_member(1, masked)])
     with pytest.raises(ValueError, match="seed=None"):
         NStepSARSAPopulation([NStepSARSA("MlpPolicy", "CartPole-v1", **SETTING)])
 

@@ -14,6 +14,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.type_aliases import MaybeCallback
 from torch import nn
 
+from sb3_classic.common.masking import is_masking_supported
 from sb3_classic.common.stacked import StackedAdam, StackedMLP
 
 #: The remaining progress at which two schedules are compared (``same_setting``)
@@ -67,8 +68,9 @@ def check_population(
     :param algorithm: ``NStepSARSA`` or ``REINFORCE``
     :param shared_settings: the attributes every member must share (``same_setting``)
     :param check_member: the algorithm's checks of one member (its index, the model), raising for what is not covered
-    :raises ValueError: for no members, a model twice, a member without a seed or an env, or members of different
-        settings (and what ``check_member`` raises)
+    :raises ValueError: for no members, a model twice, a member without a seed or an env, one whose env has action
+        masks (a population's stacked forward pass chooses over every action), or members of different settings (and
+        what ``check_member`` raises)
     :raises TypeError: for a member that is not an ``algorithm`` model (and what ``check_member`` raises)
     """
     name = algorithm.__name__
@@ -85,6 +87,12 @@ def check_population(
         if model.env is None:
             raise ValueError(
                 f"member {k} (seed {model.seed}) has no env to train on: build it with one, or call model.set_env(env) first"
+            )
+        if is_masking_supported(model.env):
+            raise ValueError(
+                f"member {k} (seed {model.seed}): its env has action_masks(), and a population trains without masks: "
+                "train masked models one after the other (model.learn), or pass envs without the masks (no ActionMasker) "
+                "to train unmasked"
             )
         check_member(k, model)
         for setting in shared_settings:

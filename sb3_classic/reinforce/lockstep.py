@@ -14,7 +14,6 @@ from stable_baselines3.common.type_aliases import MaybeCallback
 from torch import nn
 
 from sb3_classic.common.buffers import TrainingBatch
-from sb3_classic.common.masking import is_masking_supported
 from sb3_classic.common.population import (
     StackedPart,
     check_population,
@@ -499,12 +498,6 @@ def _check_member(k: int, model: REINFORCE) -> None:
         raise ValueError(
             f"{name}: action_space={model.action_space}: a population draws Discrete actions from its stacked logits; "
             "train Box, MultiDiscrete and MultiBinary models one after the other (model.learn)"
-        )
-    assert model.env is not None, "check_population checked it"
-    if is_masking_supported(model.env):
-        raise ValueError(
-            f"{name}: its env has action_masks(), and a population trains without masks: train masked models one after "
-            "the other (model.learn), or pass envs without the masks (no ActionMasker) to train unmasked"
         )
     policy = model.policy
     extractors = {policy.pi_features_extractor, policy.vf_features_extractor}

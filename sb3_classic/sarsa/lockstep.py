@@ -99,8 +99,8 @@ class NStepSARSAPopulation:
     (``target_update_interval``, ``tau``, ``averaging_tau``), schedules and decays, several envs per member;
     ``"MlpPolicy"`` (linear layers and elementwise activations) over flat Box observations, and ``torch.optim.Adam``
     without weight decay, AMSGrad or ``maximize``. Anything else (``"LinearPolicy"``, LayerNorm, CNN or Dict
-    observations, another optimizer) is refused with a ``ValueError``/``TypeError`` that names it; action masks are not
-    read (each member chooses over every action).
+    observations, another optimizer, an env with action masks) is refused with a ``ValueError``/``TypeError`` that
+    names it.
 
     :param models: the members, ``NStepSARSA`` models of one setting (every argument but ``seed`` and ``env``), each
         with its own seed (not None) and env
@@ -156,7 +156,7 @@ class NStepSARSAPopulation:
         try:
             for model, rng in zip(models, self.action_rngs, strict=True):
                 model._action_rng = rng
-                # (no action masks: the stacked forward pass chooses over every action)
+                # (no action masks: check_members refused envs with them)
                 model._setup_masking(False)
                 # A member's optimizer is not stepped while the population trains it (StackedAdam is): a file saved now
                 # would hold a stale Adam state, so saving waits until learn returns
