@@ -46,7 +46,9 @@ class StudyResults:
     :param verdicts: per reading, the result of each claim (absent where a variant has no run)
     :param missing: the runs not in the cache
     :param run_seconds: per run found (its cache key), its ``learn()`` and final evaluation time in seconds (one CPU
-        core each); studies and readings that share a run share its key
+        core each; a run trained in lockstep, its share of its population's); studies and readings that share a run
+        share its key
+    :param lockstep_runs: the keys of the runs found that were trained in lockstep (``run.json``'s ``training``)
     """
 
     study: StudySpec
@@ -57,6 +59,7 @@ class StudyResults:
     verdicts: dict[str, list[stats.ClaimResult]] = field(default_factory=dict)
     missing: list[StudyRun] = field(default_factory=list)
     run_seconds: dict[str, float] = field(default_factory=dict)
+    lockstep_runs: set[str] = field(default_factory=set)
     n_runs: int = 0
 
     @property
@@ -86,6 +89,8 @@ def load_study_results(study: StudySpec, cache_dir: Path) -> StudyResults:
             continue
         summary = load_run(run_dir)
         results.run_seconds[run.spec.key()] = float(summary["learn_time_s"]) + float(summary.get("eval_time_s", 0.0))
+        if summary.get("training") == "lockstep":
+            results.lockstep_runs.add(run.spec.key())
         results.n_runs += 1
         episodes = load_run_table(run_dir, EPISODES_FILE, study.budget.episodes or 0)
         frames.setdefault((run.reading, run.variant), []).append(episodes)
@@ -104,6 +109,16 @@ def load_study_results(study: StudySpec, cache_dir: Path) -> StudyResults:
                 judged.append(stats.judge(claim, {variant: variants[variant] for variant in needed}))  # type: ignore[misc]
         results.verdicts[reading] = judged
     return results
+
+
+def _trained_how(results: StudyResults) -> str:
+    """:return: how the study's runs found were trained, for its page (nothing if every one alone)"""
+    lockstep = len(results.lockstep_runs)
+    if not lockstep:
+        return ""
+    if lockstep == len(results.run_seconds):
+        return ", trained in lockstep: each variant's seeds one population"
+    return f", {lockstep} of them trained in lockstep"
 
 
 def study_command(study: StudySpec, extra: Sequence[str] = (), program: str = PROGRAM, root: Path | None = None) -> str:
@@ -249,6 +264,7 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         "missing_runs": len(results.missing),
         "cpu_hours": results.learn_seconds / 3600,
         "run_seconds": results.run_seconds,
+        "lockstep_runs": sorted(results.lockstep_runs),
         "claims": claims,
         "claim_texts": [claim.text for claim in study.claims],
     }
@@ -269,7 +285,7 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         "",
         f"- {study.algo} on {study.env_id}, {len(study.seeds)} seeds per variant, {study.budget.describe()} per run "
         f"({results.n_runs} runs found, {len(results.missing)} missing; {results.learn_seconds / 3600:.2f} CPU hours for "
-        f"the {len(results.run_seconds)} distinct ones).",
+        f"the {len(results.run_seconds)} distinct ones{_trained_how(results)}).",
         f"- Threshold: {study.threshold:g}, reached when the mean of {study.threshold_window} consecutive training "
         "episodes reaches it (episodes to threshold: the last episode of the first such window; seeds that never "
         f"reach it count as {censored_at}, a lower bound).",
@@ -387,8 +403,10 @@ def write_studies_index(
     # results of full and of reduced runs (--results-dir given to both): the title and the compute say which
     run_seconds: dict[str, float] = {}
     reduced_runs: set[str] = set()
+    lockstep_runs: set[str] = set()
     for record in records.values():
         run_seconds.update(record.get("run_seconds", {}))
+        lockstep_runs.update(record.get("lockstep_runs", []))
         if record.get("reduced"):
             reduced_runs.update(record.get("run_seconds", {}))
     runs, hours = len(run_seconds), math.fsum(run_seconds.values()) / 3600
@@ -419,8 +437,14 @@ def write_studies_index(
             else "."
         ),
         f"Compute: {runs} distinct {plural(runs, 'run', 'runs')}{of_reduced}, {hours:.1f} CPU hours (`learn()` and the final "
-        "evaluation, one core per run), "
-        "summed over the studies' results in this folder, each run once (they may come from several invocations: the "
+        "evaluation, one core per run; a run trained in lockstep counts its share of its population's), "
+        + (
+            f"{len(lockstep_runs & set(run_seconds))} of them trained in lockstep "
+            f"({math.fsum(run_seconds[key] for key in lockstep_runs & set(run_seconds)) / 3600:.1f} CPU hours), "
+            if lockstep_runs & set(run_seconds)
+            else ""
+        )
+        + "summed over the studies' results in this folder, each run once (they may come from several invocations: the "
         "cache resumes).",
         "",
         "| Source | Claim | Measured | Verdict | Command |",
