@@ -23,11 +23,13 @@ from benchmarks import run
 from benchmarks.common import REPO_ROOT
 from sb3_classic.harness import pool
 from sb3_classic.harness.common import RunSpec, code_versions
+from sb3_classic.harness.lockstep import plan_lockstep
 from sb3_classic.harness.runner import (
     EPISODES_FILE,
     EVALUATIONS_FILE,
     RUN_FILE,
     RunResult,
+    execute_population,
     execute_run,
     load_run,
     run_one,
@@ -214,15 +216,21 @@ def test_a_run_whose_worker_dies_runs_again(tmp_path: Path, monkeypatch: pytest.
     # The killed run started again on the other worker, and finished there
     assert {address for name, _, address in events if name == killed_run} == {killed_worker, *survivors}
     assert max(steps for name, steps, address in events if name == killed_run and address in survivors) >= budget // 2
-    specs = [RunSpec.create("reinforce", "CartPole-v1", seed, budget, eval_freq=5000, n_eval_episodes=2) for seed in (0, 1)]
+    # The two seeds trained in lockstep, one population: the whole population started again on the other worker
+    specs = plan_lockstep(
+        [RunSpec.create("reinforce", "CartPole-v1", seed, budget, eval_freq=5000, n_eval_episodes=2) for seed in (0, 1)]
+    )
+    assert all(spec.lockstep for spec in specs)
     assert len(list((tmp_path / "cache").rglob(RUN_FILE))) == len(specs)
     assert not list((tmp_path / "cache").rglob("*.partial"))
     for spec in specs:
         assert (spec.run_dir(tmp_path / "cache") / RUN_FILE).exists(), spec.name
-    # The run done again is the run a local process does
-    (spec,) = [spec for spec in specs if spec.name == killed_run]
-    run_one(spec, tmp_path / "local")
-    assert_same_results(spec, tmp_path / "cache", tmp_path / "local")
+    # The population done again is the one a local process trains
+    for spec, result in zip(specs, execute_population(specs), strict=True):
+        assert isinstance(result, RunResult)
+        store_run(spec, tmp_path / "local", result)
+    for spec in specs:
+        assert_same_results(spec, tmp_path / "cache", tmp_path / "local")
 
 
 def test_without_scheduler_dask_is_not_imported(tmp_path: Path) -> None:
@@ -320,7 +328,8 @@ def test_a_run_lost_with_its_workers_is_reported_not_missing(
             pass
 
     monkeypatch.setattr(pool, "open_runs", lambda *args: nullcontext(LostRuns(lose_all=False)))
-    options = [*SMALL, "--algos", "reinforce", "--seeds", "2", "--budget", "300", "--eval-freq", "100"]
+    # Each seed a job of its own (--separate), so that one is lost and the other comes back
+    options = [*SMALL, "--algos", "reinforce", "--seeds", "2", "--budget", "300", "--eval-freq", "100", "--separate"]
     status = run.main([*options, "--cache-dir", str(tmp_path / "cache"), "--results-dir", str(tmp_path / "results")])
     output = capsys.readouterr().out
     assert status == 1
