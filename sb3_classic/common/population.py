@@ -4,7 +4,8 @@ setting trained in lockstep): the checks of their members, each member's generat
 member stacked with its Adam state (``StackedPart``), and the end of ``learn`` for each member.
 """
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any, cast
 
 import numpy as np
@@ -116,6 +117,61 @@ def per_member_callbacks(callback: Sequence[MaybeCallback] | None, n_members: in
     if len(callbacks) != n_members:
         raise ValueError(f"callback: {len(callbacks)} callbacks for {n_members} members: pass one per member (None for none)")
     return callbacks
+
+
+def start_learn(
+    models: Sequence[Any],
+    callback: Sequence[MaybeCallback] | None,
+    total_timesteps: int,
+    reset_num_timesteps: bool,
+    tb_log_name: str,
+) -> tuple[list[int], list[BaseCallback]]:
+    """
+    The start of ``learn`` for each member, as its algorithm's ``learn`` starts it (``_setup_learn``, its callbacks'
+    ``on_training_start``).
+
+    :param models: the members
+    :param callback: one callback (or None, or a list of them) per member, or None for none
+    :param total_timesteps: env steps per member
+    :param reset_num_timesteps: the algorithm's ``learn``'s
+    :param tb_log_name: the name of each member's run for TensorBoard logging
+    :return: each member's env steps to train to, and its callback
+    :raises ValueError: for another count of callbacks than one per member
+    """
+    callbacks = per_member_callbacks(callback, len(models))
+    setups = [
+        model._setup_learn(total_timesteps, member_callback, reset_num_timesteps, tb_log_name, False)
+        for model, member_callback in zip(models, callbacks, strict=True)
+    ]
+    member_callbacks = [member_callback for _, member_callback in setups]
+    for member_callback in member_callbacks:
+        member_callback.on_training_start(locals(), globals())
+    return [total for total, _ in setups], member_callbacks
+
+
+@contextmanager
+def trained_together(population: str, models: Sequence[Any], rngs: Sequence[np.random.Generator]) -> Iterator[None]:
+    """
+    While a population trains its members: each draws its behaviour policy's actions from its own generator, reads no
+    action masks (the population's check refused envs with them), and refuses ``save`` (``refusing_save``); as before
+    when the context ends, however it ends.
+
+    :param population: the population's class name, for the messages
+    :param models: the members
+    :param rngs: their generators (``member_rng``)
+    """
+    for model, rng in zip(models, rngs, strict=True):
+        model._action_rng = rng
+        model._setup_masking(False)
+        # A member's optimizers are not stepped while the population trains it (the StackedAdams are): a file saved
+        # now would hold a stale Adam state, so saving waits until learn returns
+        model.__dict__["save"] = refusing_save(population)
+    try:
+        yield
+    finally:
+        for model in models:
+            model._action_rng = None
+            model.__dict__.pop("save", None)
 
 
 def refusing_save(population: str) -> Callable[..., None]:

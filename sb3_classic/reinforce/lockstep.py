@@ -21,8 +21,8 @@ from sb3_classic.common.population import (
     finish_learn,
     linear_parameters,
     member_rng,
-    per_member_callbacks,
-    refusing_save,
+    start_learn,
+    trained_together,
 )
 from sb3_classic.common.stacked import StackedMLP, clip_grad_norms_per_member
 from sb3_classic.common.utils import check_positive_int
@@ -133,35 +133,18 @@ class REINFORCEPopulation:
             that member stops as its last update left it, the others train to the end first
         """
         models = self.models
-        callbacks = per_member_callbacks(callback, len(models))
         if log_interval is not None:
             check_positive_int("log_interval", log_interval, hint="Pass the updates between two logger dumps, or None")
-        for model in models:
-            # (no action masks: check_members refused envs with them)
-            model._setup_masking(False)
-        setups = [
-            model._setup_learn(total_timesteps, member_callback, reset_num_timesteps, tb_log_name, False)
-            for model, member_callback in zip(models, callbacks, strict=True)
-        ]
-        totals = [total for total, _ in setups]
-        member_callbacks = [member_callback for _, member_callback in setups]
-        for member_callback in member_callbacks:
-            member_callback.on_training_start(locals(), globals())
+        totals, member_callbacks = start_learn(models, callback, total_timesteps, reset_num_timesteps, tb_log_name)
 
         run = _LockstepRun(models, member_callbacks, totals, log_interval)
-        try:
-            for model, rng in zip(models, self.action_rngs, strict=True):
-                model._action_rng = rng
-                # A member's optimizers are not stepped while the population trains it (the StackedAdams are): a file
-                # saved now would hold a stale Adam state, so saving waits until learn returns
-                model.__dict__["save"] = refusing_save("REINFORCEPopulation")
-            run.run()
-        finally:
-            run.trainer.close()
-            for model in models:
-                model._action_rng = None
-                model._next_cdf = None
-                model.__dict__.pop("save", None)
+        with trained_together("REINFORCEPopulation", models, self.action_rngs):
+            try:
+                run.run()
+            finally:
+                run.trainer.close()
+                for model in models:
+                    model._next_cdf = None
         finish_learn("REINFORCEPopulation", models, member_callbacks, run.iterations, run.errors, log_interval)
         return models
 

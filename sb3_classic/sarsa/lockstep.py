@@ -19,8 +19,8 @@ from sb3_classic.common.population import (
     dump,
     finish_learn,
     member_rng,
-    per_member_callbacks,
-    refusing_save,
+    start_learn,
+    trained_together,
 )
 from sb3_classic.common.stacked import StackedMLP, clip_grad_norms_per_member
 from sb3_classic.common.utils import check_positive_int
@@ -135,60 +135,57 @@ class NStepSARSAPopulation:
             that member stops as its last update left it, the others train to the end first
         """
         models = self.models
-        callbacks = per_member_callbacks(callback, len(models))
         if log_interval == "auto":
             log_interval = -(-LOG_EVERY_STEPS // models[0].train_freq)
         if log_interval is not None:
             check_positive_int("log_interval", log_interval, hint='Pass the updates between two logger dumps, "auto" or None')
-        setups = [
-            model._setup_learn(total_timesteps, member_callback, reset_num_timesteps, tb_log_name, False)
-            for model, member_callback in zip(models, callbacks, strict=True)
-        ]
-        totals = [total for total, _ in setups]
-        member_callbacks = [member_callback for _, member_callback in setups]
-        for member_callback in member_callbacks:
-            member_callback.on_training_start(locals(), globals())
+        totals, member_callbacks = start_learn(models, callback, total_timesteps, reset_num_timesteps, tb_log_name)
 
         errors: dict[int, ValueError] = {}
         stopped: set[int] = set()
         iterations = [0] * len(models)
         trainer = _LockstepTrainer(models)
-        try:
-            for model, rng in zip(models, self.action_rngs, strict=True):
-                model._action_rng = rng
-                # (no action masks: check_members refused envs with them)
-                model._setup_masking(False)
-                # A member's optimizer is not stepped while the population trains it (StackedAdam is): a file saved now
-                # would hold a stale Adam state, so saving waits until learn returns
-                model.__dict__["save"] = refusing_save("NStepSARSAPopulation")
-            # A member's update trains its transitions one stacked step at a time, while the others go on with their
-            # env steps and updates: each member makes the updates of its separate run in the same order. Between two
-            # stacked steps, every member without an update in progress takes env steps (one stacked forward pass
-            # for all of them per env step) until its next update has something to train: at an episode's start a
-            # member takes its first n - 1 steps without waiting for the others' gradient steps, as its weights do not
-            # change before its next update
-            updates: dict[int, _MemberUpdate] = {}
-            rollouts = [_Rollout(model, member_callbacks[k]) for k, model in enumerate(models)]
-            while True:
-                ready = [
-                    k
-                    for k, model in enumerate(models)
-                    if k not in stopped and k not in updates and (rollouts[k].running or model.num_timesteps < totals[k])
-                ]
-                if not ready and not updates:
-                    break
-                _env_steps(ready, rollouts, trainer, updates, totals, iterations, errors, stopped, log_interval)
-                for k in trainer.step(updates):
-                    update = updates.pop(k)
-                    models[k]._finish_update(update.batch, update.n_chunks, update.q_first, update.losses)
-                    dump(models[k], iterations[k], log_interval)
-        finally:
-            trainer.close()
-            for model in models:
-                model._action_rng = None
-                model.__dict__.pop("save", None)
+        with trained_together("NStepSARSAPopulation", models, self.action_rngs):
+            try:
+                self._train(trainer, member_callbacks, totals, iterations, errors, stopped, log_interval)
+            finally:
+                trainer.close()
         finish_learn("NStepSARSAPopulation", models, member_callbacks, iterations, errors, log_interval)
         return models
+
+    def _train(
+        self,
+        trainer: "_LockstepTrainer",
+        member_callbacks: list[BaseCallback],
+        totals: list[int],
+        iterations: list[int],
+        errors: dict[int, ValueError],
+        stopped: set[int],
+        log_interval: int | None,
+    ) -> None:
+        """The members' env steps and stacked gradient steps until every member has trained to its total, or stopped."""
+        models = self.models
+        # A member's update trains its transitions one stacked step at a time, while the others go on with their
+        # env steps and updates: each member makes the updates of its separate run in the same order. Between two
+        # stacked steps, every member without an update in progress takes env steps (one stacked forward pass
+        # for all of them per env step) until its next update has something to train: at an episode's start a
+        # member takes its first n - 1 steps without waiting for the others' gradient steps, as its weights do not
+        # change before its next update
+        updates: dict[int, _MemberUpdate] = {}
+        rollouts = [_Rollout(model, member_callbacks[k]) for k, model in enumerate(models)]
+        while True:
+            ready = [
+                k
+                for k, model in enumerate(models)
+                if k not in stopped and k not in updates and (rollouts[k].running or model.num_timesteps < totals[k])
+            ]
+            if not ready and not updates:
+                break
+            _env_steps(ready, rollouts, trainer, updates, totals, iterations, errors, stopped, log_interval)
+            for k in trainer.step(updates):
+                update = updates.pop(k)
+                models[k]._finish_update(update.batch, update.n_chunks, update.q_first, update.losses)
+                dump(models[k], iterations[k], log_interval)
 
 
 def _env_steps(
