@@ -88,12 +88,7 @@ def run_on_worker(spec: RunSpec, expected: dict[str, str]) -> RunResult:
     :return: the run's summary and files
     :raise ClusterError: if the worker's versions differ from the client's (the run is not trained)
     """
-    worker = get_worker()
-    host = f"{platform.node()} (Dask worker {worker.address})"
-    differences = version_differences(expected, worker_versions())
-    if differences:
-        raise ClusterError(f"{host} has other versions than the client ({'; '.join(differences)}): {_VERSIONS_FIX}")
-    return execute_run(spec, WorkerProgress(), host)
+    return execute_run(spec, WorkerProgress(), _checked_worker(expected))
 
 
 def run_population_on_worker(specs: Sequence[RunSpec], expected: dict[str, str]) -> list[RunResult | RunError]:
@@ -106,12 +101,21 @@ def run_population_on_worker(specs: Sequence[RunSpec], expected: dict[str, str])
     :return: each run's result or error
     :raise ClusterError: if the worker's versions differ from the client's (nothing is trained)
     """
+    return execute_population(specs, WorkerProgress(), _checked_worker(expected))
+
+
+def _checked_worker(expected: dict[str, str]) -> str:
+    """
+    :param expected: the client's ``worker_versions()``
+    :return: this worker's name for messages, once its versions are the client's
+    :raise ClusterError: if they differ
+    """
     worker = get_worker()
     host = f"{platform.node()} (Dask worker {worker.address})"
     differences = version_differences(expected, worker_versions())
     if differences:
         raise ClusterError(f"{host} has other versions than the client ({'; '.join(differences)}): {_VERSIONS_FIX}")
-    return execute_population(specs, WorkerProgress(), host)
+    return host
 
 
 class DaskRuns:
