@@ -156,11 +156,13 @@ def test_a_member_steps_its_envs_as_its_separate_run() -> None:
     NStepSARSAPopulation(members).learn(120, callback=own_recorders)
     for member, model, own, theirs in zip(members, separate, own_recorders, recorders, strict=True):
         assert own.events == theirs.events
+        assert member.ep_info_buffer is not None
+        assert model.ep_info_buffer is not None
         assert [(e["r"], e["l"]) for e in member.ep_info_buffer] == [(e["r"], e["l"]) for e in model.ep_info_buffer]
         assert member.exploration_rate == model.exploration_rate
         assert member._episodes_before_rollout == model._episodes_before_rollout
         assert np.array_equal(member._last_obs, model._last_obs)  # type: ignore[arg-type]
-        assert np.array_equal(member._last_episode_starts, model._last_episode_starts)
+        assert np.array_equal(member._last_episode_starts, model._last_episode_starts)  # type: ignore[arg-type]
 
 
 def test_a_population_repeats_itself_and_saves_ordinary_models(tmp_path: Path) -> None:
@@ -312,7 +314,11 @@ def test_members_of_different_settings_are_refused() -> None:
         NStepSARSAPopulation([make_member(0), make_member(1, n_steps=5)])
     # The stacked forward pass chooses over every action: an env with masks is refused, not trained unmasked
     masked = make_vec_env(
-        "CartPole-v1", n_envs=1, seed=1, wrapper_class=ActionMasker, wrapper_kwargs=dict(action_mask_fn=lambda env: [1, 1])
+        "CartPole-v1",
+        n_envs=1,
+        seed=1,
+        wrapper_class=ActionMasker,  # type: ignore[arg-type]
+        wrapper_kwargs=dict(action_mask_fn=lambda env: [1, 1]),
     )
     with pytest.raises(ValueError, match=r"member 1 \(seed 1\): its env has action_masks\(\)"):
         NStepSARSAPopulation([make_member(0), make_member(1, masked)])

@@ -72,8 +72,15 @@ def test_a_member_of_a_population_is_the_run_of_its_seed_whatever_the_others() -
 
 def test_a_member_stopped_by_its_env_fails_alone(monkeypatch: pytest.MonkeyPatch) -> None:
     class StoppedSecond(NStepSARSAPopulation):
-        def learn(self, total_timesteps: int, callback: Any = None, **kwargs: Any) -> Any:
-            super().learn(total_timesteps, callback, **kwargs)
+        def learn(
+            self,
+            total_timesteps: int,
+            callback: Any = None,
+            log_interval: Any = "auto",
+            tb_log_name: str = "NStepSARSA",
+            reset_num_timesteps: bool = True,
+        ) -> Any:
+            super().learn(total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps)
             raise MemberError("member 1 (seed 1) stopped", {1: ValueError("the env returned NaN")})
 
     monkeypatch.setattr(runner, "population_class", lambda algo: StoppedSecond)

@@ -95,7 +95,7 @@ def test_member_trains_as_its_separate_run(steps: int, kwargs: dict[str, Any], m
 
 def test_learning_rate_decays_are_each_members_own() -> None:
     # Episode-counted decays part the members' rates (they end episodes at different times): each gets its own
-    kwargs = dict(update_mode="batch", lr_decay_every=3, lr_decay_factor=0.5)
+    kwargs: dict[str, Any] = dict(update_mode="batch", lr_decay_every=3, lr_decay_factor=0.5)
     separate = [separate_run(seed, 400, **kwargs) for seed in (0, 1)]
     members = REINFORCEPopulation([make_member(seed, **kwargs) for seed in (0, 1)]).learn(400)
     for member, model in zip(members, separate, strict=True):
@@ -185,7 +185,11 @@ def masked_env(seed: int) -> VecEnv:
         return np.ones(2, dtype=bool)
 
     return make_vec_env(
-        "CartPole-v1", n_envs=1, seed=seed, wrapper_class=ActionMasker, wrapper_kwargs=dict(action_mask_fn=valid_actions)
+        "CartPole-v1",
+        n_envs=1,
+        seed=seed,
+        wrapper_class=ActionMasker,  # type: ignore[arg-type]
+        wrapper_kwargs=dict(action_mask_fn=valid_actions),
     )
 
 
