@@ -323,3 +323,53 @@ class StackedPart:
                     "exp_avg": exp_avg.clone(memory_format=th.contiguous_format),
                     "exp_avg_sq": exp_avg_sq.clone(memory_format=th.contiguous_format),
                 }
+
+
+class MemberRollout:
+    """
+    A member's rollout loop (``ClassicOnPolicyAlgorithm.collect_rollouts``), one env step at a time, so that a
+    population can choose every member's actions from one stacked forward pass (the caller hands the member its slice,
+    ``_next_q_values`` or ``_next_cdf``, before each step): the member's own ``_start_rollout`` and ``_rollout_step``
+    (its behaviour policy's draws, its env and Monitor, ``num_timesteps``, its callback's ``on_step``, the checks for NaN
+    and ±inf, the buffer, the episode counts), and the rollout's end as ``collect_rollouts`` ends it.
+
+    :param model: the member
+    :param callback: its callback, as ``_setup_learn`` made it
+    """
+
+    def __init__(self, model: Any, callback: BaseCallback) -> None:
+        self.model = model
+        self.callback = callback
+        #: whether a rollout is under way, and its env steps (per env) and episodes so far
+        self.running = False
+        self.n_steps = self.n_episodes = 0
+
+    def step(self) -> bool | None:
+        """
+        One env step of the member's rollout (its start first, if none is under way), and its end if it is complete.
+
+        :return: whether the rollout is complete (the update's turn); None if the callback stopped training
+        :raises ValueError: the member's own error for a non-finite reward or observation
+        """
+        model, callback = self.model, self.callback
+        if not self.running:
+            model._start_rollout(callback)
+            self.running, self.n_steps, self.n_episodes = True, 0, 0
+        try:
+            continue_training, n_ended = model._rollout_step(
+                model.env, callback, model.rollout_buffer, self.n_steps, self.n_episodes
+            )
+        except ValueError:
+            self.running = False
+            raise
+        self.n_steps += 1
+        self.n_episodes += n_ended
+        if not continue_training:
+            self.running = False
+            return None
+        if not model._rollout_complete(self.n_steps, self.n_episodes):
+            return False
+        callback.update_locals(dict(n_steps=self.n_steps, n_episodes=self.n_episodes))
+        callback.on_rollout_end()
+        self.running = False
+        return True

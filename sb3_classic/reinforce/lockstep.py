@@ -15,6 +15,7 @@ from torch import nn
 
 from sb3_classic.common.buffers import TrainingBatch
 from sb3_classic.common.population import (
+    MemberRollout,
     StackedPart,
     check_population,
     dump,
@@ -169,8 +170,8 @@ class _LockstepRun:
         self.stopped: set[int] = set()
         #: each member's rollouts so far (``time/iterations``)
         self.iterations = [0] * len(models)
-        #: each member's rollout in progress: its steps and episodes so far (None: none open)
-        self.rollouts: list[list[int] | None] = [None] * len(models)
+        #: each member's rollout loop
+        self.rollouts = [MemberRollout(model, callback) for model, callback in zip(models, callbacks, strict=True)]
         self.updates: dict[int, _MemberUpdate] = {}
         self.trainer = _LockstepTrainer(models)
 
@@ -194,12 +195,8 @@ class _LockstepRun:
         for k, model in enumerate(self.models):
             if k in self.stopped or k in self.updates:
                 continue
-            if self.rollouts[k] is None:
-                if model.num_timesteps >= self.totals[k]:
-                    continue
-                model._start_rollout(self.callbacks[k])
-                self.rollouts[k] = [0, 0]
-            stepping.append(k)
+            if self.rollouts[k].running or model.num_timesteps < self.totals[k]:
+                stepping.append(k)
         return stepping
 
     def _step(self, k: int, cdf: np.ndarray) -> None:
@@ -210,21 +207,21 @@ class _LockstepRun:
         :param k: the member
         :param cdf: its cumulative probabilities (``softmax_cdf``), shape (n_envs, n_actions)
         """
-        model, rollout = self.models[k], self.rollouts[k]
-        assert rollout is not None
+        model = self.models[k]
+        model._next_cdf = cdf
         try:
-            go_on = _env_step(model, self.callbacks[k], rollout, cdf)
+            complete = self.rollouts[k].step()
         except ValueError as error:
             self.errors[k] = error
             self.stopped.add(k)
             return
-        if not go_on:
+        finally:
+            model._next_cdf = None
+        if complete is None:  # (the callback stopped training)
             self.stopped.add(k)
             return
-        if not model._rollout_complete(rollout[0], rollout[1]):
+        if not complete:
             return
-        self.callbacks[k].on_rollout_end()
-        self.rollouts[k] = None
         self.iterations[k] += 1
         model._update_current_progress_remaining(model.num_timesteps, self.totals[k])
         batch = model._start_update()
@@ -232,28 +229,6 @@ class _LockstepRun:
             dump(model, self.iterations[k], self.log_interval)
         else:
             self.updates[k] = _MemberUpdate(model, batch)
-
-
-def _env_step(model: REINFORCE, callback: BaseCallback, rollout: list[int], cdf: np.ndarray) -> bool:
-    """
-    One env step of a member's rollout (``collect_rollouts``'s loop), its actions drawn from the stacked forward
-    pass's probabilities.
-
-    :param model: the member
-    :param callback: its callback
-    :param rollout: its rollout's steps and episodes so far, counted on here
-    :param cdf: its cumulative probabilities (``softmax_cdf``), shape (n_envs, n_actions)
-    :return: False if its callback stopped training
-    :raises ValueError: if its env returned NaN or ±inf
-    """
-    model._next_cdf = cdf
-    try:
-        go_on, n_ended = model._rollout_step(model.env, callback, model.rollout_buffer, rollout[0], rollout[1])  # type: ignore[arg-type]
-    finally:
-        model._next_cdf = None
-    rollout[0] += 1
-    rollout[1] += n_ended
-    return go_on
 
 
 class _MemberUpdate:

@@ -14,6 +14,7 @@ from stable_baselines3.dqn.policies import QNetwork
 
 from sb3_classic.common.buffers import TrainingBatch
 from sb3_classic.common.population import (
+    MemberRollout,
     StackedPart,
     check_population,
     dump,
@@ -172,7 +173,7 @@ class NStepSARSAPopulation:
         # member takes its first n - 1 steps without waiting for the others' gradient steps, as its weights do not
         # change before its next update
         updates: dict[int, _MemberUpdate] = {}
-        rollouts = [_Rollout(model, member_callbacks[k]) for k, model in enumerate(models)]
+        rollouts = [MemberRollout(model, member_callbacks[k]) for k, model in enumerate(models)]
         while True:
             ready = [
                 k
@@ -190,7 +191,7 @@ class NStepSARSAPopulation:
 
 def _env_steps(
     ready: list[int],
-    rollouts: list["_Rollout"],
+    rollouts: list[MemberRollout],
     trainer: "_LockstepTrainer",
     updates: dict[int, "_MemberUpdate"],
     totals: list[int],
@@ -220,7 +221,9 @@ def _env_steps(
         for k in stepping:
             model = rollouts[k].model
             try:
-                complete = rollouts[k].step(q_values[k])
+                # (q̂ from the stacked forward pass: no forward pass of the member's own)
+                model._next_q_values = q_values[k]
+                complete = rollouts[k].step()
             except ValueError as error:
                 errors[k] = error
                 stopped.add(k)
@@ -240,61 +243,6 @@ def _env_steps(
             dump(model, iterations[k], log_interval)
             if model.num_timesteps < totals[k]:
                 ready.append(k)
-
-
-class _Rollout:
-    """
-    A member's rollout loop (``ClassicOnPolicyAlgorithm.collect_rollouts``), one env step at a time, so that the
-    population can choose every member's action from one stacked forward pass: the member's own ``_start_rollout`` and
-    ``_rollout_step`` (its behaviour policy's draws, its env and Monitor, ``num_timesteps``, its callback's
-    ``on_step``, the checks for NaN and ±inf, the buffer, the episode counts and ε), without masks (the population reads
-    none), and the rollout's end as ``collect_rollouts`` ends it.
-
-    :param model: the member
-    :param callback: its callback, as ``_setup_learn`` made it
-    """
-
-    def __init__(self, model: NStepSARSA, callback: BaseCallback) -> None:
-        self.model = model
-        self.callback = callback
-        assert model.env is not None
-        self.env = model.env
-        #: whether a rollout is under way, and its env steps (per env) and episodes so far
-        self.running = False
-        self.n_steps = self.n_episodes = 0
-
-    def step(self, q_values: np.ndarray) -> bool | None:
-        """
-        One env step of the member's rollout (its start first, if none is under way), and its end if it is complete.
-
-        :param q_values: q̂(S, ·) of the member's current observations, shape (n_envs, n_actions)
-        :return: whether the rollout is complete (the update's turn); None if the callback stopped training
-        :raises ValueError: the member's own error for a non-finite reward or observation
-        """
-        model, callback = self.model, self.callback
-        if not self.running:
-            model._start_rollout(callback)
-            self.running, self.n_steps, self.n_episodes = True, 0, 0
-        # (from the stacked forward pass's q̂: no forward pass of the member's own)
-        model._next_q_values = q_values
-        try:
-            continue_training, n_ended = model._rollout_step(
-                self.env, callback, model.rollout_buffer, self.n_steps, self.n_episodes
-            )
-        except ValueError:
-            self.running = False
-            raise
-        self.n_steps += 1
-        self.n_episodes += n_ended
-        if not continue_training:
-            self.running = False
-            return None
-        if not model._rollout_complete(self.n_steps, self.n_episodes):
-            return False
-        callback.update_locals(dict(n_steps=self.n_steps, n_episodes=self.n_episodes))
-        callback.on_rollout_end()
-        self.running = False
-        return True
 
 
 class _MemberUpdate:
