@@ -4,8 +4,9 @@ the same K seeds trained one after the other (``model.learn``), in one process w
 settings (``--settings``) per algorithm (``--algo``):
 
 - ``per_step``: NStepSARSA in the book's per-step mode (2 × 128 MLP, n_steps 10 on CartPole-v1 and 5 on Acrobot-v1,
-  learning_rate 5e-4, train_freq 1, gradient_steps 1, update_mode "per_step"); REINFORCE's per-step final model of the
-  seed report on CartPole-v1 (``studies/seed_report/fig08-reinforce-cartpole-final.yml``);
+  learning_rate 5e-4, train_freq 1, gradient_steps 1, update_mode "per_step"); REINFORCE's per-step final models of the
+  seed report on CartPole-v1 and Acrobot-v1 (``studies/seed_report/fig08-reinforce-cartpole-final.yml``,
+  ``fig24-reinforce-acrobot-final.yml``);
 - ``batch``: the tuned batch-mode entries of ``hyperparams/nstep_sarsa.yml`` (8 envs per seed, train_freq 16,
   gradient_steps 8, 2 × 256 MLP; Acrobot-v1's with its bootstrap network, weight average, λ-returns and Expected SARSA)
   and of ``hyperparams/reinforce.yml`` (one env, one Adam step per episode).
@@ -44,8 +45,11 @@ SETTING = "per_step: 2x128 MLP, lr 5e-4, train_freq 1, gradient_steps 1"
 #: The families of settings, in the order of the tables
 SETTINGS = ("per_step", "batch")
 ALGOS = ("NStepSARSA", "REINFORCE")
-#: The seed report's per-step final model of REINFORCE on CartPole-v1
-FINAL_PER_STEP = Path(__file__).resolve().parent / "studies" / "seed_report" / "fig08-reinforce-cartpole-final.yml"
+#: The seed report's per-step final models of REINFORCE, by figure
+FINAL_PER_STEP = {
+    figure: Path(__file__).resolve().parent / "studies" / "seed_report" / f"{figure}-reinforce-{name}-final.yml"
+    for figure, name in (("fig08", "cartpole"), ("fig24", "acrobot"))
+}
 
 
 def make_models(env_id: str, k: int) -> list[NStepSARSA]:
@@ -168,10 +172,11 @@ def reinforce_settings() -> list[tuple[str, str, dict[str, Any]]]:
         kwargs = {key: value for key, value in entry.items() if key not in ("n_timesteps", "policy", "n_envs")}
         kwargs["policy_kwargs"] = _policy_kwargs(kwargs.get("policy_kwargs"))
         settings.append((env_id, "batch: hyperparams/reinforce.yml", kwargs))
-    study = yaml.safe_load(FINAL_PER_STEP.read_text())
-    kwargs = {key: value for key, value in study["hyperparams"].items() if key not in ("policy", "n_envs")}
-    kwargs["policy_kwargs"] = _policy_kwargs(kwargs.get("policy_kwargs"))
-    settings.append((study["env"], "per_step: the seed report's final model (fig08)", kwargs))
+    for figure, path in FINAL_PER_STEP.items():
+        study = yaml.safe_load(path.read_text())
+        kwargs = {key: value for key, value in study["hyperparams"].items() if key not in ("policy", "n_envs")}
+        kwargs["policy_kwargs"] = _policy_kwargs(kwargs.get("policy_kwargs"))
+        settings.append((study["env"], f"per_step: the seed report's final model ({figure})", kwargs))
     return settings
 
 
@@ -263,13 +268,23 @@ measured), Python {platform.python_version()}, torch {th.__version__}.
 |---|---|---|---|---|---|---|---|
 {table}
 
-Where the time goes (cProfile of 10 CartPole-v1 members in lockstep). Per-step setting, 1,500 env steps each: a
-quarter in the stacked gradient steps (one per env step: a member with no transition to train yet steps on before the
-next one), a fifth in the members' envs (VecEnv, Monitor, CartPole), and the rest in each member's own Python work per
-env step (its rollout bookkeeping and callback, its ε-greedy draw, its windows, targets and logger), which lockstep does
-not share. Batch setting, 8,192 env steps each: half in the stacked gradient steps, whose backward pass through the
-2 × 256 layers at batches of about 128 is bound by arithmetic (it costs what the members' own backward passes cost), and
-over a quarter in the members' envs.
+Where the time goes (cProfile of 10 members in lockstep, one thread). Per-step setting on CartPole-v1, 1,500 env
+steps each: 40% in the members' rollout steps, of which under half is their envs (SB3's `DummyVecEnv` copying its
+infos and observations, Monitor, Gymnasium's wrappers; CartPole's own `step` is a quarter of the envs' time), a quarter
+in the stacked gradient steps (one per env step), an eighth in the stacked forward passes that choose the actions
+(about four per gradient step: at an episode's start a member takes its first n − 1 env steps before the others' next
+gradient step, each with a forward pass), and the rest in each member's own work (the start of its update and its
+n-step targets, its ε-greedy draw, its windows and logger). Without the profiler, lockstep takes about 230 µs per member
+and env step against 700 µs for a run alone; about 150 µs of the 230 is each member's own Python work, which lockstep
+does not share. A ratio of 5 needs 140 µs: less than that work alone, so it would take the members' envs and rollout
+bookkeeping stepped as arrays across members (a vectorised env and rollout loop in place of SB3's VecEnv and the
+algorithm's own loop), not a faster shared step.
+
+Batch settings, 8,192 env steps each: half in the stacked gradient steps, and those are bound by arithmetic: a stacked
+forward and backward pass of ten 2 × 256 networks at batches of 128 takes 5.7 ms on one thread, the ten networks' own
+5.4 ms, so stacking saves the per-call overhead of the rollouts' forward passes and of Adam, not the gradients'
+arithmetic. The rest is the members' envs (on Acrobot-v1, its physics' Runge-Kutta integration is a third of the
+profiled time) and their rollout loops, each member's own.
 
 REINFORCE's batch mode shares the forward pass of the rollouts; its updates, one per episode and member, seldom fall
 on the same env step, so most stacked gradient steps train one member, and each member's own work per env step (its
