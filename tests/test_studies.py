@@ -19,6 +19,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 import pytest
@@ -849,6 +850,58 @@ def test_the_compute_counts_each_shared_run_once(tmp_path: Path) -> None:
     reduced = outputs.write_studies_index([study], tmp_path, extra=["--seeds", "2"], reduced=True).read_text()
     assert reduced.startswith("# Studies (reduced runs)\n")
     assert "Compute: 1 distinct run, 0.1 CPU hours" in reduced
+
+
+def test_many_readings_are_summed_up_with_the_one_that_favours_the_claim_most(tmp_path: Path) -> None:
+    # Five readings of one setting, each giving n3 another lead over n1: STUDIES.md groups the other readings by
+    # verdict and names the best, the study's page says under which readings the claim holds, and the figure wraps
+    # its five panels into rows of four (one row of five panels was 32 inches wide, of 20 readings 128)
+    leads = {"as stated": -6.0, "lr_a": 0.0, "lr_b": 3.0, "lr_c": 12.0, "lr_d": 6.0}
+    text = (
+        TINY.replace("seeds: 2", "seeds: 6")
+        + "readings:\n"
+        + "".join(f"  {name}: {{learning_rate: {0.002 + index / 1000}}}\n" for index, name in enumerate(list(leads)[1:]))
+    )
+    study_file = write_study(tmp_path, text)
+    cache, results = tmp_path / "cache", tmp_path / "results"
+    rng = np.random.default_rng(0)
+    for run in load_study(study_file).runs():
+        run_dir = run.spec.run_dir(cache)
+        run_dir.mkdir(parents=True)
+        (run_dir / "run.json").write_text(json.dumps({"learn_time_s": 1.0, "eval_time_s": 0.0}))
+        value = 50.0 + leads[run.reading] * (run.variant == "n3") + rng.normal(0.0, 0.5)
+        (run_dir / "episodes.csv").write_text("return\n" + "\n".join([f"{value:.3f}"] * 6) + "\n")
+    command = [str(study_file), "--report-only", "--cache-dir", str(cache), "--results-dir", str(results)]
+    assert studies_cli.main(command) == 0
+    (row,) = (line for line in (results / "STUDIES.md").read_text().splitlines() if "n = 3 beats n = 1" in line)
+    assert "| reversed |" in row
+    assert "Other readings (4): too close to call under lr_a; supported under lr_b, lr_c, lr_d." in row
+    assert "Best reading: lr_c, mean return (all episodes): n3 − n1: +12." in row
+    page = (results / "study.md").read_text()
+    assert 'Best reading for "n = 3 beats n = 1": `lr_c` (supported;' in page
+    assert "Supported under 3 of 5 readings: `lr_b`, `lr_c`, `lr_d`." in page
+    height, width = plt.imread(results / "study.png").shape[:2]
+    assert (round(width / 110 / 6.4), round(height / 110 / 4.4)) == (4, 2)
+    # Up to three other readings, each is named with its verdict
+    record = json.loads((results / "study.json").read_text())
+    record["claims"] = [claim for claim in record["claims"] if claim["reading"] in ("as stated", "lr_a", "lr_c")]
+    (results / "study.json").write_text(json.dumps(record))
+    index = outputs.write_studies_index([load_study(study_file)], results).read_text()
+    assert "Other readings: lr_a: too close to call; lr_c: supported." in index
+
+
+def test_favour_is_how_far_a_measurement_goes_the_claims_way() -> None:
+    def result(kind: str, estimates: list[float], **fields: object) -> stats.ClaimResult:
+        comparisons = tuple(stats.Comparison(None, stats.Interval(value, value - 1, value + 1), "") for value in estimates)
+        return stats.ClaimResult(claim(kind, **fields), "", comparisons, "")
+
+    assert stats.favour(result("reaches", [400.0], value=475.0)) == -75.0
+    assert stats.favour(result("below", [-120.0], value=-100.0)) == 20.0
+    assert stats.favour(result("better", [30.0, 10.0])) == 10.0
+    # Fewer episodes to threshold is better: a negative difference favours the claim
+    assert stats.favour(result("better", [-30.0], metric="episodes_to_threshold")) == 30.0
+    assert stats.favour(result("similar", [4.0, -7.0], margin=10.0)) == -7.0
+    assert np.isnan(stats.favour(result("reaches", [float("nan")], value=1.0)))
 
 
 # ---- the command, end to end ---------------------------------------------------------------------------------------

@@ -29,6 +29,10 @@ STUDIES_FILE = "STUDIES.md"
 NOT_RUN = "not yet run"
 #: The module of the command the outputs show (``python -m sb3_classic.studies ...``)
 PROGRAM = "sb3_classic.studies"
+#: The panels (one per reading) in a row of a study's figure
+MAX_PANEL_COLUMNS = 4
+#: STUDIES.md names each other reading's verdict of a claim up to this many readings, and sums them up beyond
+MAX_LISTED_READINGS = 3
 
 
 @dataclass
@@ -192,16 +196,20 @@ def plot_study(results: StudyResults, path: Path) -> Path:
     """
     The seed report's figure: training return per episode, the mean over seeds with its 95% bootstrap band, one
     line per variant (a moving average of ``study.smooth`` episodes, of each seed before the mean); one panel per
-    reading.
+    reading, ``MAX_PANEL_COLUMNS`` to a row.
 
     :return: ``path``
     """
     study = results.study
     readings = list(study.readings)
+    columns = min(len(readings), MAX_PANEL_COLUMNS)
+    rows = -(-len(readings) // columns)
     figure, axes = plt.subplots(
-        1, len(readings), figsize=(6.4 * len(readings), 4.4), squeeze=False, sharey=True, layout="constrained"
+        rows, columns, figsize=(6.4 * columns, 4.4 * rows), squeeze=False, sharey=True, layout="constrained"
     )
-    for axis, reading in zip(axes[0], readings, strict=True):
+    for axis in axes.flat[len(readings) :]:
+        axis.set_visible(False)
+    for axis, reading in zip(axes.flat, readings, strict=False):
         for variant in study.variants:
             returns = results.returns.get((reading, variant))
             if returns is None:
@@ -219,7 +227,8 @@ def plot_study(results: StudyResults, path: Path) -> Path:
             axis.text(0.5, 0.5, "no run in the cache yet", transform=axis.transAxes, ha="center", color="grey")
         axis.grid(alpha=0.3)
     smooth = f", moving average of {study.smooth} episodes" if study.smooth > 1 else ""
-    axes[0][0].set_ylabel("Training return")
+    for row in axes:
+        row[0].set_ylabel("Training return")
     figure.suptitle(f"{study.title}\nmean over seeds with its 95% bootstrap band{smooth}", fontsize=10)
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(path, dpi=110)
@@ -247,7 +256,13 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
     for reading, judged in results.verdicts.items():
         for result in judged:
             claims.append(
-                {"text": result.claim.text, "reading": reading, "verdict": result.verdict, "measured": result.measured}
+                {
+                    "text": result.claim.text,
+                    "reading": reading,
+                    "verdict": result.verdict,
+                    "measured": result.measured,
+                    "favour": stats.favour(result),
+                }
             )
     record = {
         "study": study.name,
@@ -315,6 +330,8 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
                 lines.append(f"- **{NOT_RUN}**{suffix}: {claim.text} (the runs of a variant it compares are missing).")
             else:
                 lines.append(f"- **{found.verdict}**{partial}{suffix}: {claim.text}. Measured: {found.measured}.")
+    if len(results.verdicts) > 1:
+        lines += ["", *_best_readings(results)]
     lines += [
         "",
         "## Table",
@@ -515,6 +532,28 @@ def _step_budget_notes(results: StudyResults) -> list[str]:
     return [note, *_short_run_notes(study, fewest, "for the seed with the fewest")]
 
 
+def _best_readings(results: StudyResults) -> list[str]:
+    """:return: for each claim, the reading whose measurement goes furthest its way (``stats.favour``), a line each"""
+    lines = []
+    for claim in results.study.claims:
+        judged = [
+            (reading, result)
+            for reading, results_of_reading in results.verdicts.items()
+            for result in results_of_reading
+            if result.claim.text == claim.text and not math.isnan(stats.favour(result))
+        ]
+        if not judged:
+            continue
+        reading, best = max(judged, key=lambda item: stats.favour(item[1]))
+        held = [name for name, result in judged if result.verdict == stats.SUPPORTED]
+        where = ", ".join(f"`{name}`" for name in held) if held else "none"
+        lines.append(
+            f'Best reading for "{claim.text}": `{reading}` ({best.verdict}; {best.measured}). '
+            f"Supported under {len(held)} of {len(judged)} readings: {where}."
+        )
+    return lines
+
+
 def plural(count: int, one: str, many: str) -> str:
     """:return: ``one`` for a count of 1, else ``many``"""
     return one if count == 1 else many
@@ -532,15 +571,37 @@ def _claim_rows(
             continue
         verdict = stated[0]["verdict"]
         measured = stated[0]["measured"]
-        others = [f"{claim['reading']}: {claim['verdict']}" for claim in judged if claim["reading"] != STATED]
-        if others:
-            measured = measured.rstrip(".") + ". Other readings: " + "; ".join(others) + "."
+        others = [claim for claim in judged if claim["reading"] != STATED]
+        if len(others) > MAX_LISTED_READINGS:
+            measured = measured.rstrip(".") + ". " + _readings_summary(stated[0], others)
+        elif others:
+            listed = "; ".join(f"{claim['reading']}: {claim['verdict']}" for claim in others)
+            measured = measured.rstrip(".") + f". Other readings: {listed}."
         if not record.get("complete", True):
             verdict += f" (partial: {record['missing_runs']} runs missing)"
         if record.get("reduced"):
             verdict += " (reduced run)"
         rows.append((f"[{source or name}]({name}.md)", text, measured, verdict, f"`{command}`"))
     return rows
+
+
+def _readings_summary(stated: dict[str, Any], others: list[dict[str, Any]]) -> str:
+    """
+    :param stated: a claim's record under the reading as stated (``write_study``'s json)
+    :param others: its records under the other readings
+    :return: the other readings by verdict, and the one that favours the claim most (``stats.favour``) with its
+        measurement, for STUDIES.md's row of the claim
+    """
+    by_verdict: dict[str, list[str]] = {}
+    for claim in others:
+        by_verdict.setdefault(claim["verdict"], []).append(claim["reading"])
+    parts = [f"{verdict} under {', '.join(names)}" for verdict, names in by_verdict.items()]
+    text = f"Other readings ({len(others)}): " + "; ".join(parts) + "."
+    scored = [claim for claim in [stated, *others] if not math.isnan(claim.get("favour", math.nan))]
+    if scored:
+        best = max(scored, key=lambda claim: claim["favour"])
+        text += f" Best reading: {best['reading']}, {best['measured'].rstrip('.')} ({best['verdict']})."
+    return text
 
 
 def _without_budget(entry: dict[str, Any]) -> dict[str, Any]:

@@ -260,6 +260,28 @@ def higher_is_better(claim: Claim) -> bool:
     return claim.statistic == "mean" and claim.metric != "episodes_to_threshold"
 
 
+def favour(result: ClaimResult) -> float:
+    """
+    :param result: a claim's verdict under one reading
+    :return: how far its measurement goes the claim's way, in the metric's units (the larger, the more the reading
+        favours the claim; NaN if nothing was measured): for ``reaches`` the estimate's margin above the level, for
+        ``below`` below it, for ``better`` the smallest of its comparisons' differences oriented so that positive is
+        the claim's way, for ``similar`` minus the largest distance from 0 of its differences
+    """
+    claim = result.claim
+    estimates = np.array([comparison.interval.estimate for comparison in result.comparisons], dtype=float)
+    if estimates.size == 0 or np.isnan(estimates).any():
+        return float("nan")
+    if claim.kind == "reaches":
+        return float(estimates[0] - (claim.value or 0.0))
+    if claim.kind == "below":
+        return float((claim.value or 0.0) - estimates[0])
+    if claim.kind == "better":
+        sign = 1.0 if higher_is_better(claim) else -1.0
+        return float(np.min(sign * estimates))
+    return float(-np.max(np.abs(estimates)))
+
+
 def judge(claim: Claim, metrics: Mapping[str, Mapping[str, np.ndarray]]) -> ClaimResult:
     """
     :param claim: the claim
