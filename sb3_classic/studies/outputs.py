@@ -331,7 +331,7 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
             else:
                 lines.append(f"- **{found.verdict}**{partial}{suffix}: {claim.text}. Measured: {found.measured}.")
     if len(results.verdicts) > 1:
-        lines += ["", *_best_readings(results)]
+        lines += ["", *_best_readings([claim.text for claim in study.claims], claims)]
     lines += [
         "",
         "## Table",
@@ -532,26 +532,32 @@ def _step_budget_notes(results: StudyResults) -> list[str]:
     return [note, *_short_run_notes(study, fewest, "for the seed with the fewest")]
 
 
-def _best_readings(results: StudyResults) -> list[str]:
-    """:return: for each claim, the reading whose measurement goes furthest its way (``stats.favour``), a line each"""
+def _best_readings(claim_texts: Sequence[str], records: Sequence[dict[str, Any]]) -> list[str]:
+    """
+    :param claim_texts: the study's claims
+    :param records: each claim's record under each reading (``write_study``'s json)
+    :return: for each claim, the reading that favours it most (``stats.favour``) and those under which it holds, a line
+        each
+    """
     lines = []
-    for claim in results.study.claims:
-        judged = [
-            (reading, result)
-            for reading, results_of_reading in results.verdicts.items()
-            for result in results_of_reading
-            if result.claim.text == claim.text and not math.isnan(stats.favour(result))
-        ]
-        if not judged:
+    for text in claim_texts:
+        judged = [record for record in records if record["text"] == text]
+        best = _most_favourable(judged)
+        if best is None:
             continue
-        reading, best = max(judged, key=lambda item: stats.favour(item[1]))
-        held = [name for name, result in judged if result.verdict == stats.SUPPORTED]
+        held = [record["reading"] for record in judged if record["verdict"] == stats.SUPPORTED]
         where = ", ".join(f"`{name}`" for name in held) if held else "none"
         lines.append(
-            f'Best reading for "{claim.text}": `{reading}` ({best.verdict}; {best.measured}). '
+            f'Best reading for "{text}": `{best["reading"]}` ({best["verdict"]}; {best["measured"]}). '
             f"Supported under {len(held)} of {len(judged)} readings: {where}."
         )
     return lines
+
+
+def _most_favourable(records: Sequence[dict[str, Any]]) -> dict[str, Any] | None:
+    """:return: of a claim's records under several readings, the one of the largest ``favour``; None if none has one"""
+    scored = [record for record in records if not math.isnan(record.get("favour", math.nan))]
+    return max(scored, key=lambda record: record["favour"]) if scored else None
 
 
 def plural(count: int, one: str, many: str) -> str:
@@ -597,9 +603,8 @@ def _readings_summary(stated: dict[str, Any], others: list[dict[str, Any]]) -> s
         by_verdict.setdefault(claim["verdict"], []).append(claim["reading"])
     parts = [f"{verdict} under {', '.join(names)}" for verdict, names in by_verdict.items()]
     text = f"Other readings ({len(others)}): " + "; ".join(parts) + "."
-    scored = [claim for claim in [stated, *others] if not math.isnan(claim.get("favour", math.nan))]
-    if scored:
-        best = max(scored, key=lambda claim: claim["favour"])
+    best = _most_favourable([stated, *others])
+    if best is not None:
         text += f" Best reading: {best['reading']}, {best['measured'].rstrip('.')} ({best['verdict']})."
     return text
 
