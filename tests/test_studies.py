@@ -563,6 +563,16 @@ def test_the_report_studies_load() -> None:
     assert runs > 500
 
 
+@pytest.mark.skipif(not PER_STEP_MODE, reason="the studies use update_mode='per_step'")
+def test_every_setting_of_the_report_studies_builds() -> None:
+    # The check the runner makes before it runs anything (each distinct setting's model built once), over every
+    # committed study file: a variant the algorithm refuses (an option its schedule would ignore) fails here, not
+    # when the study is run
+    studies = [load_study(path) for path in sorted(SEED_REPORT_STUDIES.glob("*.yml"))]
+    pending = {run.spec.key() for study in studies for run in study.runs()}
+    assert studies_cli.check_settings(studies, pending, Console(file=io.StringIO())) == []
+
+
 def test_settings_only_the_algorithm_can_judge_fail_before_any_run(tmp_path: Path) -> None:
     # A policy_kwargs key, an activation's name, an option's value: each variant's model is built once, before anything
     # runs, and every problem is named with its file and variant
@@ -846,6 +856,10 @@ def test_the_compute_counts_each_shared_run_once(tmp_path: Path) -> None:
     assert mixed.startswith("# Studies (full and reduced runs: the reduced ones are marked)\n")
     assert "Compute: 3 distinct runs (1 of them of reduced runs), 1.1 CPU hours" in mixed
     assert "one.yml --seeds 2`" in mixed
+    # One table in the studies' order, not the last command's study first ("two" re-run alone, "one" on record)
+    study_two = load_study(write_study(tmp_path, TINY, "two.yml"))
+    ordered = outputs.write_studies_index([study_two], tmp_path).read_text()
+    assert ordered.index("x one.yml") < ordered.index("two.yml`")
     (tmp_path / "two.json").unlink()
     reduced = outputs.write_studies_index([study], tmp_path, extra=["--seeds", "2"], reduced=True).read_text()
     assert reduced.startswith("# Studies (reduced runs)\n")

@@ -406,16 +406,17 @@ def write_studies_index(
         record = json.loads(path.read_text())
         if isinstance(record, dict) and "claims" in record and "study" in record:
             records[record["study"]] = record
-    rows = []
-    listed = set()
+    # One table in the order of the studies' names (a seed report's figures in order), whichever command wrote it last
+    rows_of: dict[str, list[tuple[str, str, str, str, str]]] = {}
     for study in studies:
-        listed.add(study.name)
         record = records.get(study.name)
         command = study_command(study, extra, program=program, root=root)
-        rows += _claim_rows(study.name, study.source, [claim.text for claim in study.claims], record, command)
+        rows_of[study.name] = _claim_rows(study.name, study.source, [c.text for c in study.claims], record, command)
     for name, record in records.items():
-        if name not in listed:
-            rows += _claim_rows(name, record.get("source", ""), record["claim_texts"], record, record["command"])
+        if name not in rows_of:
+            rows_of[name] = _claim_rows(name, record.get("source", ""), record["claim_texts"], record, record["command"])
+    rows = [row for name in sorted(rows_of) for row in rows_of[name]]
+    listed = {study.name for study in studies}
     # Each distinct run once: studies (and readings) that share settings share their runs. A folder may hold the
     # results of full and of reduced runs (--results-dir given to both): the title and the compute say which
     run_seconds: dict[str, float] = {}
