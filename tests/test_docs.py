@@ -3,6 +3,7 @@ image, a docstring autodoc cannot render), its Python examples run, its links to
 commands' modules exist, and its numbers are those of the committed results."""
 
 import importlib.metadata
+import json
 import importlib.util
 import re
 import shlex
@@ -223,3 +224,26 @@ def test_the_book_table_is_the_committed_results() -> None:
     rows = [row for row in table.splitlines() if row.startswith("| ") and not row.startswith("| Figure")]
     assert len(rows) >= 6
     assert [row for row in rows if row not in committed] == []
+
+
+def test_the_studies_verdicts_are_the_committed_results() -> None:
+    # The seed report's table in the studies guide: each row's verdicts (as stated, and with one step per episode
+    # where the study reads it) are its figure's committed verdicts, claim by claim in the study file's order
+    text = page_text("guide/studies.md")
+    (table,) = re.findall(r"^\| Figure \| Claim \| As stated \| One step per episode \|\n\|[-|]+\n((?:\|.*\n)+)", text, re.M)
+    rows_of: dict[int, list[list[str]]] = {}
+    for row in table.splitlines():
+        figure, _, *verdicts = (cell.strip() for cell in row.strip().strip("|").split("|"))
+        rows_of.setdefault(int(figure), []).append(verdicts)
+    records = {int(path.name[3:5]): path for path in (RESULTS / "studies").glob("fig*.json")}
+    assert sorted(rows_of) == sorted(records), "one figure's rows per committed study"
+    for figure, rows in rows_of.items():
+        record = json.loads(records[figure].read_text())
+        for reading, column in (("as stated", 0), ("one_step_per_episode", 1)):
+            verdicts = [claim["verdict"] for claim in record["claims"] if claim["reading"] == reading]
+            cells = [re.sub(r"[*(].*", "", row[column].replace("**", "")).strip() for row in rows]
+            if not verdicts:
+                assert set(cells) == {"–"}, f"Fig {figure}: {reading} is not a reading of its study"
+                continue
+            # (a cell starts with its verdict; what follows in parentheses is the detail)
+            assert [cell.split(",")[0].replace(" barely", "") for cell in cells] == verdicts, f"Fig {figure}, {reading}"
