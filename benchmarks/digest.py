@@ -8,6 +8,10 @@ What a digest covers, after ``learn()`` on the CPU with one PyTorch thread:
 - every tensor of ``model.get_parameters()`` (the policy's and the optimizers' states), by name, as raw bytes;
 - every value of the ``train/`` keys at every logger dump (``log_interval=1``: one dump per rollout), as ``float.hex``.
 
+The populations (``population-*``: three seeds of one setting trained in lockstep, ``NStepSARSAPopulation`` or
+``REINFORCEPopulation``) digest each member as above and hash the members' digests in member order, so that a change
+to the lockstep code proves itself as a change to a separate run's does.
+
     python -m benchmarks.digest                      # the digests of every configuration, as JSON
     python -m benchmarks.digest --save FILE          # the same, written to FILE
     python -m benchmarks.digest --check FILE         # exit 1 and name each configuration whose digest differs
@@ -32,6 +36,8 @@ from stable_baselines3.common.logger import KVWriter, Logger
 import sb3_classic.envs  # noqa: F401  (registers the book's envs)
 from sb3_classic import REINFORCE, NStepSARSA, TileCoding
 from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
+from sb3_classic.reinforce import REINFORCEPopulation
+from sb3_classic.sarsa import NStepSARSAPopulation
 
 SMALL_NET = dict(net_arch=[64, 64])
 
@@ -80,15 +86,15 @@ def _flatten(prefix: str, value: Any) -> list[tuple[str, Any]]:
 
 
 def _sarsa(
-    env_id: str, n_envs: int, steps: int, policy: str = "MlpPolicy", **kwargs: Any
+    env_id: str, n_envs: int, steps: int, policy: str = "MlpPolicy", seed: int = 0, **kwargs: Any
 ) -> tuple[ClassicOnPolicyAlgorithm, int]:
-    env = make_vec_env(env_id, n_envs=n_envs, seed=0)
-    return NStepSARSA(policy, env, seed=0, device="cpu", **kwargs), steps
+    env = make_vec_env(env_id, n_envs=n_envs, seed=seed)
+    return NStepSARSA(policy, env, seed=seed, device="cpu", **kwargs), steps
 
 
-def _reinforce(n_envs: int, steps: int, **kwargs: Any) -> tuple[ClassicOnPolicyAlgorithm, int]:
-    env = make_vec_env("CartPole-v1", n_envs=n_envs, seed=0)
-    return REINFORCE("MlpPolicy", env, seed=0, device="cpu", policy_kwargs=SMALL_NET, **kwargs), steps
+def _reinforce(n_envs: int, steps: int, seed: int = 0, **kwargs: Any) -> tuple[ClassicOnPolicyAlgorithm, int]:
+    env = make_vec_env("CartPole-v1", n_envs=n_envs, seed=seed)
+    return REINFORCE("MlpPolicy", env, seed=seed, device="cpu", policy_kwargs=SMALL_NET, **kwargs), steps
 
 
 #: The configurations, each a model to train and its env steps: every update path of both algorithms
@@ -140,6 +146,42 @@ CONFIGURATIONS: dict[str, Callable[[], tuple[ClassicOnPolicyAlgorithm, int]]] = 
     "reinforce-per-step": lambda: _reinforce(1, 1500, update_mode="per_step"),
 }
 
+#: The seeds of a population's members
+POPULATION_SEEDS = (0, 1, 2)
+
+#: The populations, each a maker of one member (by seed) and its env steps: both algorithms' lockstep paths, per step
+#: and in the batch mode (SARSA's with several envs, λ-returns and the copies of q̂)
+POPULATIONS: dict[str, Callable[[int], tuple[ClassicOnPolicyAlgorithm, int]]] = {
+    "population-sarsa-per-step-n10": lambda seed: _sarsa(
+        "CartPole-v1",
+        1,
+        1500,
+        seed=seed,
+        n_steps=10,
+        update_mode="per_step",
+        train_freq=1,
+        gradient_steps=1,
+        policy_kwargs=SMALL_NET,
+    ),
+    "population-sarsa-batch-lambda-bootstrap-averaging": lambda seed: _sarsa(
+        "Acrobot-v1",
+        8,
+        4000,
+        seed=seed,
+        n_steps=5,
+        td_lambda=0.5,
+        expected_sarsa=True,
+        gamma=0.999,
+        target_update_interval=1,
+        tau=0.5,
+        averaging_tau=0.05,
+        max_grad_norm=10.0,
+        policy_kwargs=SMALL_NET,
+    ),
+    "population-reinforce-1-env": lambda seed: _reinforce(1, 3000, seed=seed),
+    "population-reinforce-per-step": lambda seed: _reinforce(1, 1500, seed=seed, update_mode="per_step"),
+}
+
 
 def configuration_digest(name: str) -> str:
     """
@@ -158,18 +200,41 @@ def configuration_digest(name: str) -> str:
         th.set_num_threads(threads)
 
 
+def population_digest(name: str) -> str:
+    """
+    :param name: a key of ``POPULATIONS``
+    :return: the digest of its members' seeded training in lockstep (each member's digest, hashed in member order)
+    """
+    threads = th.get_num_threads()
+    th.set_num_threads(1)
+    try:
+        built = [POPULATIONS[name](seed) for seed in POPULATION_SEEDS]
+        models, steps = [model for model, _ in built], built[0][1]
+        train_logs = [TrainLog() for _ in models]
+        for model, train_log in zip(models, train_logs, strict=True):
+            model.set_logger(Logger(folder=None, output_formats=[train_log]))
+        population = NStepSARSAPopulation if isinstance(models[0], NStepSARSA) else REINFORCEPopulation
+        population(models).learn(steps, log_interval=1)  # type: ignore[arg-type]
+        hasher = hashlib.sha256()
+        for model, train_log in zip(models, train_logs, strict=True):
+            hasher.update(digest(model, train_log.dumps).encode())
+        return hasher.hexdigest()
+    finally:
+        th.set_num_threads(threads)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--save", type=Path, help="write the digests to this JSON file")
     group.add_argument("--check", type=Path, help="compare with the digests of this JSON file (exit 1 if any differ)")
-    parser.add_argument("--only", nargs="+", choices=sorted(CONFIGURATIONS), help="these configurations only")
+    parser.add_argument("--only", nargs="+", choices=sorted([*CONFIGURATIONS, *POPULATIONS]), help="these configurations only")
     args = parser.parse_args(argv)
 
-    names = args.only or list(CONFIGURATIONS)
+    names = args.only or [*CONFIGURATIONS, *POPULATIONS]
     digests = {}
     for name in names:
-        digests[name] = configuration_digest(name)
+        digests[name] = population_digest(name) if name in POPULATIONS else configuration_digest(name)
         print(f"{name}: {digests[name]}", file=sys.stderr, flush=True)
     if args.check is not None:
         expected = json.loads(args.check.read_text())

@@ -62,3 +62,24 @@ def test_the_configurations_cover_both_algorithms_and_both_update_modes() -> Non
     modes = {(type(model).__name__, model.update_mode) for model in built.values()}
     assert modes == {("NStepSARSA", "batch"), ("NStepSARSA", "per_step"), ("REINFORCE", "batch"), ("REINFORCE", "per_step")}
     assert {model.n_envs for model in built.values()} == {1, 8}
+
+
+def test_the_populations_cover_both_algorithms_and_both_update_modes_in_lockstep() -> None:
+    modes = set()
+    for name, make in digest_tool.POPULATIONS.items():
+        models = [make(seed)[0] for seed in digest_tool.POPULATION_SEEDS]
+        # (a population's own check: a setting it does not cover would train alone, not in lockstep)
+        population = digest_tool.NStepSARSAPopulation if isinstance(models[0], NStepSARSA) else digest_tool.REINFORCEPopulation
+        population(models)  # type: ignore[arg-type]
+        assert [model.seed for model in models] == list(digest_tool.POPULATION_SEEDS), name
+        modes.add((type(models[0]).__name__, models[0].update_mode))
+    assert modes == {("NStepSARSA", "batch"), ("NStepSARSA", "per_step"), ("REINFORCE", "batch"), ("REINFORCE", "per_step")}
+
+
+def test_a_population_digest_repeats_and_depends_on_every_member(monkeypatch: pytest.MonkeyPatch) -> None:
+    name = "population-reinforce-per-step"
+    first = digest_tool.population_digest(name)
+    assert digest_tool.population_digest(name) == first
+    # Another seed for the last member only: its training differs, so the digest does
+    monkeypatch.setattr(digest_tool, "POPULATION_SEEDS", (0, 1, 3))
+    assert digest_tool.population_digest(name) != first
