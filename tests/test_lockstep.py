@@ -253,6 +253,42 @@ def test_members_with_nothing_to_train_are_not_stepped() -> None:
     assert all(th.equal(m[1], w) for m, w in zip(optimizer.exp_avgs, moments, strict=True))
 
 
+def test_fused_stacked_adam_is_each_members_fused_adam_to_the_bit() -> None:
+    # Members at other step counts and learning rates, subsets and whole-stack steps: each member's slices take the
+    # steps of its own torch.optim.Adam(fused=True), the same kernel on the same values
+    th.manual_seed(0)
+    networks = [th.nn.Sequential(th.nn.Linear(3, 5), th.nn.Tanh(), th.nn.Linear(5, 2)) for _ in range(3)]
+    copies = [th.nn.Sequential(th.nn.Linear(3, 5), th.nn.Tanh(), th.nn.Linear(5, 2)) for _ in range(3)]
+    for network, copy in zip(networks, copies, strict=True):
+        copy.load_state_dict(network.state_dict())
+    stacked = StackedMLP.from_sequentials(networks)
+    optimizer = StackedAdam(list(stacked.parameters()), 3, fused=True)
+    references = [th.optim.Adam(copy.parameters(), lr=1e-2, fused=True) for copy in copies]
+    x = th.randn(3, 4, 3)
+    schedule = [[0, 1, 2], [2, 0], [1], [0, 1, 2], [0, 1, 2], [1, 2], [0, 1, 2]]
+    for step, members in enumerate(schedule):
+        # (from the fourth step on, member 1's learning rate parts from the others')
+        learning_rates = np.array([1e-2, 1e-2 if step < 3 else 3e-3, 1e-2])
+        optimizer.zero_grad()
+        stacked(x)[members].square().sum().backward()
+        optimizer.step(np.array(members), learning_rates)
+        for k in members:
+            references[k].param_groups[0]["lr"] = float(learning_rates[k])
+            references[k].zero_grad()
+            copies[k](x[k]).square().sum().backward()
+            references[k].step()
+    assert list(optimizer.steps) == [5, 6, 6]
+    stacked.share_with(networks)
+    for k, (network, copy) in enumerate(zip(networks, copies, strict=True)):
+        for p, q in zip(network.parameters(), copy.parameters(), strict=True):
+            assert th.equal(p, q), f"member {k}"
+        states = [references[k].state[q] for q in copy.parameters()]
+        assert [float(state["step"]) for state in states] == [float(optimizer.steps[k])] * len(states)
+        # (a stacked weight is nn.Linear's transposed, (in, out); a stacked bias is (1, out))
+        moments = [m[k] if m.dim() == 3 and m.shape[1] == 1 else m[k].T for m in optimizer.exp_avgs]
+        assert all(th.equal(m.reshape(-1), state["exp_avg"].reshape(-1)) for m, state in zip(moments, states, strict=True))
+
+
 def test_flushing_denormals_changes_no_normal_value() -> None:
     th.manual_seed(0)
     parameters = [th.randn(3, 4, 5, requires_grad=True), th.randn(3, 1, 5, requires_grad=True)]

@@ -218,12 +218,18 @@ class StackedAdam:
     where the gradient is 0), and no library optimizer takes a mask over slices of a tensor, which a population needs:
     n-step SARSA's members at an episode's end train several transitions one after the other while the others train one
     or none. Here each member's slice of each stacked parameter is a tensor of its own (a view) with its own step count,
-    and a step passes the slices of the members it moves to torch's functional ``torch.optim.adam.adam``: the
-    arithmetic is ``torch.optim.Adam``'s, fused or not as the members' optimizers are. A step of every member when
-    all have the same step count and learning rate (the members of a population whose updates keep in step) passes
-    the whole stacked tensors instead, with one step count each: the same elementwise arithmetic on the same values,
-    in one kernel call per parameter rather than K (torch's kernels cost a fixed overhead per tensor, which dominates
-    at the sizes of small networks).
+    and a step passes the slices of the members it moves to torch's Adam kernel: the arithmetic is
+    ``torch.optim.Adam``'s, fused or not as the members' optimizers are. A step of every member when all have the same
+    step count and learning rate (the members of a population whose updates keep in step) passes the whole stacked
+    tensors instead, with one step count each: the same elementwise arithmetic on the same values, in one kernel call
+    per parameter rather than K (torch's kernels cost a fixed overhead per tensor, which dominates at the sizes of small
+    networks).
+
+    The step counts of the slices are the entries of one tensor of shape (parameters, K). Fused, a step writes its
+    members' new counts into it with one copy and calls torch's fused kernel (``torch._fused_adam_``, the op that
+    ``torch.optim.Adam(fused=True)`` calls) on the slices directly: torch's functional ``adam`` would group the slices
+    by device and increment each slice's count with a call of its own, which costs several times the kernel at these
+    sizes. The other implementations go through torch's functional ``adam``, which increments the counts it is given.
 
     :param parameters: the stacked parameters, member first
     :param n_members: K
@@ -254,20 +260,20 @@ class StackedAdam:
         self.beta1, self.beta2 = betas
         self.eps = eps
         self.fused, self.foreach = fused, foreach
+        #: whether a step calls torch's fused kernel itself (fused, and the kernel is there)
+        self._fused_kernel = bool(fused) and hasattr(th, "_fused_adam_")
         self.exp_avgs = [th.zeros_like(parameter, memory_format=th.contiguous_format) for parameter in self.parameters]
         self.exp_avg_sqs = [th.zeros_like(parameter, memory_format=th.contiguous_format) for parameter in self.parameters]
         # Member k's slices, one tensor each: parameters, moments, and its step count t (one per slice, as torch's)
         self._parameter_slices = [parameter.data.unbind(0) for parameter in self.parameters]
         self._exp_avg_slices = [exp_avg.unbind(0) for exp_avg in self.exp_avgs]
         self._exp_avg_sq_slices = [exp_avg_sq.unbind(0) for exp_avg_sq in self.exp_avg_sqs]
-        scalar = th.float32
-        # Every member's step count t; the slices' own counts (below) are brought up to date before a slice step
-        # whenever a whole-stack step moved them all
+        # Every member's step count t, and every slice's as torch's Adam reads it: entry (p, k) of one float32 tensor
+        # (its views, _steps[p][k], are the slices' counts)
         self._member_steps = np.zeros(n_members, dtype=np.int64)
-        self._slice_steps_stale = False
-        self._steps = [
-            [th.zeros((), dtype=scalar, device=parameter.device) for _ in range(n_members)] for parameter in self.parameters
-        ]
+        device = self.parameters[0].device
+        self._slice_steps = th.zeros((len(self.parameters), n_members), dtype=th.float32, device=device)
+        self._steps = [row.unbind(0) for row in self._slice_steps]
 
     @property
     def steps(self) -> np.ndarray:
@@ -276,17 +282,8 @@ class StackedAdam:
 
     def set_state(self, member: int, step: int) -> None:
         """:param member: k; :param step: its step count t (its moments are set in ``exp_avgs``/``exp_avg_sqs``)"""
-        self._sync_slice_steps()
         self._member_steps[member] = step
-        for steps in self._steps:
-            steps[member].fill_(step)
-
-    def _sync_slice_steps(self) -> None:
-        if self._slice_steps_stale:
-            for steps in self._steps:
-                for member, step in enumerate(steps):
-                    step.fill_(int(self._member_steps[member]))
-            self._slice_steps_stale = False
+        self._slice_steps[:, member] = step
 
     def zero_grad(self) -> None:
         """Drop the gradients (``set_to_none``, as torch's optimizers)."""
@@ -311,47 +308,80 @@ class StackedAdam:
             th.set_flush_denormal(False)
 
     def _step(self, members: np.ndarray, learning_rates: np.ndarray) -> None:
+        grads = [th.zeros_like(parameter) if parameter.grad is None else parameter.grad for parameter in self.parameters]
         counts = self._member_steps[members]
         if len(members) == self.n_members and (counts == counts[0]).all() and (learning_rates == learning_rates[0]).all():
-            self._step_whole_stack(int(counts[0]), float(learning_rates[0]))
+            self._step_whole_stack(grads, int(counts[0]), float(learning_rates[0]))
             return
-        self._sync_slice_steps()
         self._member_steps[members] += 1
-        grads = [
-            (th.zeros_like(parameter) if parameter.grad is None else parameter.grad).unbind(0) for parameter in self.parameters
-        ]
+        if self._fused_kernel:
+            # (the others' counts are written as they are)
+            self._slice_steps.copy_(th.from_numpy(self._member_steps).expand_as(self._slice_steps))
+        grad_slices = [grad.unbind(0) for grad in grads]
         # One call per learning rate (one, unless the members' schedules or decays have parted them)
-        for learning_rate in np.unique(learning_rates[members]):
+        for learning_rate in sorted(set(learning_rates[members].tolist())):
             group = [int(k) for k in members if learning_rates[k] == learning_rate]
-            adam(
+            self._adam(
                 [slices[k] for slices in self._parameter_slices for k in group],
-                [slices[k] for slices in grads for k in group],
+                [slices[k] for slices in grad_slices for k in group],
                 [slices[k] for slices in self._exp_avg_slices for k in group],
                 [slices[k] for slices in self._exp_avg_sq_slices for k in group],
-                [],
                 [steps[k] for steps in self._steps for k in group],
-                foreach=self.foreach,
-                fused=self.fused,
+                learning_rate,
+            )
+
+    def _step_whole_stack(self, grads: list[th.Tensor], step: int, learning_rate: float) -> None:
+        """A step of every member, all at step count ``step`` with one learning rate: torch's Adam on the stacks."""
+        if self._fused_kernel:
+            self._slice_steps += 1
+            # (member 0's count, as every member's, is the stack's)
+            steps = [steps[0] for steps in self._steps]
+        else:
+            # One count per tensor, which torch's adam increments
+            steps = [th.tensor(float(step), dtype=th.float32, device=self._slice_steps.device) for _ in self.parameters]
+            self._slice_steps += 1
+        self._adam(
+            [parameter.data for parameter in self.parameters], grads, self.exp_avgs, self.exp_avg_sqs, steps, learning_rate
+        )
+        self._member_steps += 1
+
+    def _adam(
+        self,
+        parameters: list[th.Tensor],
+        grads: list[th.Tensor],
+        exp_avgs: list[th.Tensor],
+        exp_avg_sqs: list[th.Tensor],
+        steps: list[th.Tensor],
+        learning_rate: float,
+    ) -> None:
+        """
+        torch's Adam step of the given tensors. Fused, ``steps`` hold their step counts t after this step (the caller
+        increments them); otherwise before it (torch's ``adam`` increments them).
+        """
+        if self._fused_kernel:
+            th._fused_adam_(
+                parameters,
+                grads,
+                exp_avgs,
+                exp_avg_sqs,
+                [],
+                steps,
                 amsgrad=False,
+                lr=learning_rate,
                 beta1=self.beta1,
                 beta2=self.beta2,
-                lr=float(learning_rate),
                 weight_decay=0.0,
                 eps=self.eps,
                 maximize=False,
             )
-
-    def _step_whole_stack(self, step: int, learning_rate: float) -> None:
-        """A step of every member, all at step count ``step`` with one learning rate: torch's ``adam`` on the stacks."""
-        device = self.parameters[0].device
+            return
         adam(
-            [parameter.data for parameter in self.parameters],
-            [th.zeros_like(parameter) if parameter.grad is None else parameter.grad for parameter in self.parameters],
-            self.exp_avgs,
-            self.exp_avg_sqs,
+            parameters,
+            grads,
+            exp_avgs,
+            exp_avg_sqs,
             [],
-            # (one count per tensor: torch's adam increments each of them)
-            [th.tensor(float(step), dtype=th.float32, device=device) for _ in self.parameters],
+            steps,
             foreach=self.foreach,
             fused=self.fused,
             amsgrad=False,
@@ -362,5 +392,3 @@ class StackedAdam:
             eps=self.eps,
             maximize=False,
         )
-        self._member_steps += 1
-        self._slice_steps_stale = True
