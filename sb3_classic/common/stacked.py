@@ -223,13 +223,18 @@ class StackedAdam:
     step count and learning rate (the members of a population whose updates keep in step) passes the whole stacked
     tensors instead, with one step count each: the same elementwise arithmetic on the same values, in one kernel call
     per parameter rather than K (torch's kernels cost a fixed overhead per tensor, which dominates at the sizes of small
-    networks).
+    networks). torch's fused CPU kernel may round an element differently in the last bit by where it sits in its
+    tensor (reordering a tensor's elements changes some of its results): as a member's slice is laid out otherwise than
+    its own ``nn.Linear`` weight (transposed) and a whole stack otherwise than its slices, a fused step may differ from
+    the member's own optimizer's in the last bits of some elements (the unfused implementations give the same bits).
 
-    The step counts of the slices are the entries of one tensor of shape (parameters, K). Fused, a step writes its
-    members' new counts into it with one copy and calls torch's fused kernel (``torch._fused_adam_``, the op that
-    ``torch.optim.Adam(fused=True)`` calls) on the slices directly: torch's functional ``adam`` would group the slices
-    by device and increment each slice's count with a call of its own, which costs several times the kernel at these
-    sizes. The other implementations go through torch's functional ``adam``, which increments the counts it is given.
+    The step counts of the slices are the entries of one tensor of shape (parameters, K). Fused on the CPU, a step
+    writes its members' new counts into it with one copy from ``steps`` and calls torch's fused kernel
+    (``torch._fused_adam_``, the op that ``torch.optim.Adam(fused=True)`` calls) on the slices directly: torch's
+    functional ``adam`` would group the slices by device and increment each slice's count with a call of its own, which
+    costs several times the kernel at these sizes. Elsewhere (the other implementations, and any device but the CPU,
+    where that copy would wait for the device at every step) a step goes through torch's functional ``adam``, which
+    increments the counts it is given.
 
     :param parameters: the stacked parameters, member first
     :param n_members: K
@@ -260,8 +265,9 @@ class StackedAdam:
         self.beta1, self.beta2 = betas
         self.eps = eps
         self.fused, self.foreach = fused, foreach
-        #: whether a step calls torch's fused kernel itself (fused, and the kernel is there)
-        self._fused_kernel = bool(fused) and hasattr(th, "_fused_adam_")
+        device = self.parameters[0].device
+        #: whether a step calls torch's fused kernel itself (fused, on the CPU, and the kernel is there)
+        self._fused_kernel = bool(fused) and device.type == "cpu" and hasattr(th, "_fused_adam_")
         self.exp_avgs = [th.zeros_like(parameter, memory_format=th.contiguous_format) for parameter in self.parameters]
         self.exp_avg_sqs = [th.zeros_like(parameter, memory_format=th.contiguous_format) for parameter in self.parameters]
         # Member k's slices, one tensor each: parameters, moments, and its step count t (one per slice, as torch's)
@@ -271,7 +277,6 @@ class StackedAdam:
         # Every member's step count t, and every slice's as torch's Adam reads it: entry (p, k) of one float32 tensor
         # (its views, _steps[p][k], are the slices' counts)
         self._member_steps = np.zeros(n_members, dtype=np.int64)
-        device = self.parameters[0].device
         self._slice_steps = th.zeros((len(self.parameters), n_members), dtype=th.float32, device=device)
         self._steps = [row.unbind(0) for row in self._slice_steps]
 
