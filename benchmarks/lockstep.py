@@ -204,6 +204,17 @@ def row(algo: str, env_id: str, setting: str, k: int, steps: int, separate: floa
                 lockstep_cpu_s=f"{lockstep:.2f}", steps=steps)  # fmt: skip
 
 
+def cpu_model() -> str:
+    """:return: the CPU's model name (Linux's ``/proc/cpuinfo``), or the machine type where it cannot be read"""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return f"{line.split(':', 1)[1].strip()} ({platform.machine()})"
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
 def settings_list(text: str) -> list[str]:
     """:return: the families of settings named in ``text`` (comma-separated), each one of ``SETTINGS``"""
     names = [name.strip() for name in text.split(",") if name.strip()]
@@ -261,8 +272,8 @@ CPU seconds (`time.process_time`) of training only, one process, one PyTorch thr
 
     {command.strip()}
 
-Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} logical CPUs (shared with other jobs while
-measured), Python {platform.python_version()}, torch {th.__version__}.
+Machine: {cpu_model()}, {os.cpu_count()} logical CPUs, Python {platform.python_version()}, torch {th.__version__}. The
+ratios depend on the CPU (its matrix products against its Python overhead): compare code on one machine.
 
 | algorithm | env | setting | K | env steps per seed | one after the other (s) | lockstep (s) | ratio |
 |---|---|---|---|---|---|---|---|

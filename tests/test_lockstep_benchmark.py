@@ -1,0 +1,41 @@
+"""The lockstep benchmark (``benchmarks/lockstep.py``): its command writes the comparison in the committed format."""
+
+import csv
+from pathlib import Path
+
+from benchmarks import lockstep
+
+COLUMNS = ["algo", "env_id", "setting", "k", "separate_cpu_s", "lockstep_cpu_s"]
+
+
+def test_the_benchmark_writes_one_row_per_algorithm_env_and_setting(tmp_path: Path) -> None:
+    lockstep.main(["--k", "2", "--steps", "60", "--batch-steps", "300", "--env", "CartPole-v1", "--out", str(tmp_path)])
+    with open(tmp_path / "lockstep.csv", newline="") as file:
+        rows = list(csv.DictReader(file))
+    assert list(rows[0]) == COLUMNS
+    assert [(row["algo"], row["setting"].split(":")[0]) for row in rows] == [
+        ("NStepSARSA", "per_step"),
+        ("NStepSARSA", "batch"),
+        ("REINFORCE", "per_step"),
+        ("REINFORCE", "batch"),
+    ]
+    assert all(row["env_id"] == "CartPole-v1" and row["k"] == "2" for row in rows)
+    assert all(float(row["separate_cpu_s"]) > 0 and float(row["lockstep_cpu_s"]) > 0 for row in rows)
+    page = (tmp_path / "lockstep.md").read_text()
+    assert "python -m benchmarks.lockstep --k 2 --steps 60" in page
+    assert page.count("| CartPole-v1 |") == 4
+
+
+def test_the_committed_comparison_has_a_row_per_algorithm_env_and_setting_of_ten_seeds() -> None:
+    with open(lockstep.RESULTS / "lockstep.csv", newline="") as file:
+        rows = list(csv.DictReader(file))
+    assert rows
+    assert list(rows[0]) == COLUMNS
+    keys = {(row["algo"], row["env_id"], row["setting"].split(":")[0]) for row in rows}
+    assert keys == {
+        (algo, env_id, setting)
+        for algo in ("NStepSARSA", "REINFORCE")
+        for env_id in ("CartPole-v1", "Acrobot-v1")
+        for setting in ("per_step", "batch")
+    }
+    assert all(row["k"] == "10" for row in rows)
