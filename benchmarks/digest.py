@@ -97,22 +97,22 @@ def _reinforce(n_envs: int, steps: int, seed: int = 0, **kwargs: Any) -> tuple[C
     return REINFORCE("MlpPolicy", env, seed=seed, device="cpu", policy_kwargs=SMALL_NET, **kwargs), steps
 
 
+#: Batched SARSA as on Acrobot: Expected SARSA's λ-returns, a bootstrap network and weight averaging
+SARSA_ACROBOT_BATCH: dict[str, Any] = dict(
+    n_steps=5,
+    td_lambda=0.5,
+    expected_sarsa=True,
+    gamma=0.999,
+    target_update_interval=1,
+    tau=0.5,
+    averaging_tau=0.05,
+    policy_kwargs=SMALL_NET,
+)
+
 #: The configurations, each a model to train and its env steps: every update path of both algorithms
 CONFIGURATIONS: dict[str, Callable[[], tuple[ClassicOnPolicyAlgorithm, int]]] = {
     # Batched SARSA as on Acrobot: 8 envs, Expected SARSA's λ-returns, a bootstrap network and weight averaging
-    "sarsa-batch-lambda-bootstrap-averaging": lambda: _sarsa(
-        "Acrobot-v1",
-        8,
-        4000,
-        n_steps=5,
-        td_lambda=0.5,
-        expected_sarsa=True,
-        gamma=0.999,
-        target_update_interval=1,
-        tau=0.5,
-        averaging_tau=0.05,
-        policy_kwargs=SMALL_NET,
-    ),
+    "sarsa-batch-lambda-bootstrap-averaging": lambda: _sarsa("Acrobot-v1", 8, 4000, **SARSA_ACROBOT_BATCH),
     # Batched SARSA as on CartPole: gradient clipping
     "sarsa-batch-clipping": lambda: _sarsa(
         "CartPole-v1", 8, 4000, n_steps=3, gamma=0.995, max_grad_norm=10.0, policy_kwargs=SMALL_NET
@@ -164,19 +164,7 @@ POPULATIONS: dict[str, Callable[[int], tuple[ClassicOnPolicyAlgorithm, int]]] = 
         policy_kwargs=SMALL_NET,
     ),
     "population-sarsa-batch-lambda-bootstrap-averaging": lambda seed: _sarsa(
-        "Acrobot-v1",
-        8,
-        4000,
-        seed=seed,
-        n_steps=5,
-        td_lambda=0.5,
-        expected_sarsa=True,
-        gamma=0.999,
-        target_update_interval=1,
-        tau=0.5,
-        averaging_tau=0.05,
-        max_grad_norm=10.0,
-        policy_kwargs=SMALL_NET,
+        "Acrobot-v1", 8, 4000, seed=seed, max_grad_norm=10.0, **SARSA_ACROBOT_BATCH
     ),
     "population-reinforce-1-env": lambda seed: _reinforce(1, 3000, seed=seed),
     "population-reinforce-per-step": lambda seed: _reinforce(1, 1500, seed=seed, update_mode="per_step"),

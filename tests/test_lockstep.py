@@ -216,13 +216,19 @@ def test_a_non_finite_reward_stops_its_member_only() -> None:
     assert all(p.is_contiguous() for member in members for p in member.policy.q_net.parameters())
 
 
-def test_members_with_nothing_to_train_are_not_stepped() -> None:
+def three_networks_stacked_and_copied() -> tuple[list[th.nn.Sequential], list[th.nn.Sequential], StackedMLP]:
+    """:return: three small MLPs (seeded), a copy of each to train alone, and the three stacked"""
     th.manual_seed(0)
     networks = [th.nn.Sequential(th.nn.Linear(3, 5), th.nn.Tanh(), th.nn.Linear(5, 2)) for _ in range(3)]
     copies = [th.nn.Sequential(th.nn.Linear(3, 5), th.nn.Tanh(), th.nn.Linear(5, 2)) for _ in range(3)]
     for network, copy in zip(networks, copies, strict=True):
         copy.load_state_dict(network.state_dict())
     stacked = StackedMLP.from_sequentials(networks)
+    return networks, copies, stacked
+
+
+def test_members_with_nothing_to_train_are_not_stepped() -> None:
+    networks, copies, stacked = three_networks_stacked_and_copied()
     optimizer = StackedAdam(list(stacked.parameters()), 3, fused=False, foreach=False)
     references = [th.optim.Adam(copy.parameters(), lr=1e-2, foreach=False) for copy in copies]
     x = th.randn(3, 4, 3)
@@ -257,12 +263,7 @@ def test_members_with_nothing_to_train_are_not_stepped() -> None:
 def test_stacked_adam_steps_each_member_as_its_own_adam(fused: bool) -> None:
     # Members at other step counts and learning rates, subsets, and whole-stack steps (every member at one count) at
     # t > 1 with a common learning rate that moved: each member's slices take the steps of its own torch.optim.Adam
-    th.manual_seed(0)
-    networks = [th.nn.Sequential(th.nn.Linear(3, 5), th.nn.Tanh(), th.nn.Linear(5, 2)) for _ in range(3)]
-    copies = [th.nn.Sequential(th.nn.Linear(3, 5), th.nn.Tanh(), th.nn.Linear(5, 2)) for _ in range(3)]
-    for network, copy in zip(networks, copies, strict=True):
-        copy.load_state_dict(network.state_dict())
-    stacked = StackedMLP.from_sequentials(networks)
+    networks, copies, stacked = three_networks_stacked_and_copied()
     foreach = None if fused else False
     optimizer = StackedAdam(list(stacked.parameters()), 3, fused=fused, foreach=foreach)
     references = [th.optim.Adam(copy.parameters(), lr=1e-2, fused=fused, foreach=foreach) for copy in copies]
