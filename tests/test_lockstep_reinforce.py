@@ -93,6 +93,34 @@ def test_member_trains_as_its_separate_run(steps: int, kwargs: dict[str, Any], m
     assert all(p.is_contiguous() and p.untyped_storage().nbytes() == p.numel() * 4 for p in after)
 
 
+def test_the_report_acrobot_model_with_one_step_per_episode_trains_as_its_separate_run() -> None:
+    # The setting of Figs 20-22's 1×256 runs read with one Adam step per episode: Leaky ReLU, γ^t, a value lr of 0.1
+    # (which amplifies the last bits most), and Acrobot-v1's 500-step episodes cut by its time limit (v̂ bootstrapped)
+    kwargs: dict[str, Any] = dict(
+        update_mode="batch",
+        gamma_t_factor=True,
+        learning_rate=1e-3,
+        value_learning_rate=1e-1,
+        policy_kwargs=dict(
+            net_arch=[256], activation_fn=th.nn.LeakyReLU, activation_kwargs=dict(negative_slope=0.1), weight_init="default"
+        ),
+    )
+    steps = 2000
+
+    def make(seed: int) -> REINFORCE:
+        return REINFORCE("MlpPolicy", make_vec_env("Acrobot-v1", n_envs=1, seed=seed), seed=seed, **kwargs)
+
+    separate = make(1)
+    separate._action_rng = member_rng(1)
+    separate.learn(steps)
+    members = [make(0), make(1)]
+    REINFORCEPopulation(members).learn(steps)
+    assert members[1]._n_updates == separate._n_updates >= 4  # (episodes of at most 500 steps)
+    assert members[1]._completed_episodes == separate._completed_episodes
+    assert max_difference(members[1], separate) < 1e-5
+    assert_same_adam_states(members[1], separate)
+
+
 def test_learning_rate_decays_are_each_members_own() -> None:
     # Episode-counted decays part the members' rates (they end episodes at different times): each gets its own
     kwargs: dict[str, Any] = dict(update_mode="batch", lr_decay_every=3, lr_decay_factor=0.5)
