@@ -24,7 +24,8 @@ import argparse
 import hashlib
 import json
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -171,21 +172,34 @@ POPULATIONS: dict[str, Callable[[int], tuple[ClassicOnPolicyAlgorithm, int]]] = 
 }
 
 
+@contextmanager
+def one_thread() -> Iterator[None]:
+    """One PyTorch thread while it lasts (seeded CPU runs repeat to the bit with a given thread count)."""
+    threads = th.get_num_threads()
+    th.set_num_threads(1)
+    try:
+        yield
+    finally:
+        th.set_num_threads(threads)
+
+
+def logged(model: BaseAlgorithm) -> TrainLog:
+    """:return: the ``train/`` log of ``model``'s logger dumps from now on (its logger replaced by one that writes it)"""
+    train_log = TrainLog()
+    model.set_logger(Logger(folder=None, output_formats=[train_log]))
+    return train_log
+
+
 def configuration_digest(name: str) -> str:
     """
     :param name: a key of ``CONFIGURATIONS``
     :return: the digest of its seeded training
     """
-    threads = th.get_num_threads()
-    th.set_num_threads(1)
-    try:
+    with one_thread():
         model, steps = CONFIGURATIONS[name]()
-        train_log = TrainLog()
-        model.set_logger(Logger(folder=None, output_formats=[train_log]))
+        train_log = logged(model)
         model.learn(steps, log_interval=1)
         return digest(model, train_log.dumps)
-    finally:
-        th.set_num_threads(threads)
 
 
 def population_digest(name: str) -> str:
@@ -193,22 +207,16 @@ def population_digest(name: str) -> str:
     :param name: a key of ``POPULATIONS``
     :return: the digest of its members' seeded training in lockstep (each member's digest, hashed in member order)
     """
-    threads = th.get_num_threads()
-    th.set_num_threads(1)
-    try:
+    with one_thread():
         built = [POPULATIONS[name](seed) for seed in POPULATION_SEEDS]
         models, steps = [model for model, _ in built], built[0][1]
-        train_logs = [TrainLog() for _ in models]
-        for model, train_log in zip(models, train_logs, strict=True):
-            model.set_logger(Logger(folder=None, output_formats=[train_log]))
+        train_logs = [logged(model) for model in models]
         population = NStepSARSAPopulation if isinstance(models[0], NStepSARSA) else REINFORCEPopulation
         population(models).learn(steps, log_interval=1)  # type: ignore[arg-type]
         hasher = hashlib.sha256()
         for model, train_log in zip(models, train_logs, strict=True):
             hasher.update(digest(model, train_log.dumps).encode())
         return hasher.hexdigest()
-    finally:
-        th.set_num_threads(threads)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -106,14 +106,8 @@ def test_the_report_acrobot_model_with_one_step_per_episode_trains_as_its_separa
         ),
     )
     steps = 2000
-
-    def make(seed: int) -> REINFORCE:
-        return REINFORCE("MlpPolicy", make_vec_env("Acrobot-v1", n_envs=1, seed=seed), seed=seed, **kwargs)
-
-    separate = make(1)
-    separate._action_rng = member_rng(1)
-    separate.learn(steps)
-    members = [make(0), make(1)]
+    separate = separate_run(1, steps, make_vec_env("Acrobot-v1", n_envs=1, seed=1), **kwargs)
+    members = [make_member(seed, make_vec_env("Acrobot-v1", n_envs=1, seed=seed), **kwargs) for seed in (0, 1)]
     REINFORCEPopulation(members).learn(steps)
     assert members[1]._n_updates == separate._n_updates >= 4  # (episodes of at most 500 steps)
     assert members[1]._completed_episodes == separate._completed_episodes

@@ -337,14 +337,14 @@ class StackedAdam:
 
     def _step_whole_stack(self, grads: list[th.Tensor], step: int, learning_rate: float) -> None:
         """A step of every member, all at step count ``step`` with one learning rate: torch's Adam on the stacks."""
-        if self._fused_kernel:
-            self._slice_steps += 1
-            # (member 0's count, as every member's, is the stack's)
-            steps = [steps[0] for steps in self._steps]
-        else:
-            # One count per tensor, which torch's adam increments
-            steps = [th.tensor(float(step), dtype=th.float32, device=self._slice_steps.device) for _ in self.parameters]
-            self._slice_steps += 1
+        self._slice_steps += 1
+        # The stack's count: member 0's, as every member's (fused); a tensor per stack at t before the step, which torch's
+        # adam increments (otherwise)
+        steps = (
+            [steps[0] for steps in self._steps]
+            if self._fused_kernel
+            else [th.tensor(float(step), dtype=th.float32, device=self._slice_steps.device) for _ in self.parameters]
+        )
         self._adam(
             [parameter.data for parameter in self.parameters], grads, self.exp_avgs, self.exp_avg_sqs, steps, learning_rate
         )
