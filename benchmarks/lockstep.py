@@ -16,6 +16,8 @@ settings (``--settings``) per algorithm (``--algo``):
     python -m benchmarks.lockstep --k 10 --batch-steps 20000 --settings batch --algo REINFORCE
 
 Seconds are ``time.process_time`` of training only (the models are built before the clock starts).
+Each row also gives lockstep's floor (``floor``): in a third run of the population, the seconds of its stacked calls and
+the members' envs, what lockstep would take were each member's own rollout code free.
 """
 
 import argparse
@@ -26,18 +28,23 @@ import shlex
 import sys
 import time
 from collections.abc import Callable
+from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
+from unittest import mock
 
 import torch as th
 import yaml
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_classic import REINFORCE, NStepSARSA
 from sb3_classic.harness.common import load_hyperparams, positive_int
 from sb3_classic.reinforce import REINFORCEPopulation
+from sb3_classic.reinforce import lockstep as reinforce_lockstep
 from sb3_classic.sarsa import NStepSARSAPopulation
+from sb3_classic.sarsa import lockstep as sarsa_lockstep
 
 RESULTS = Path(__file__).resolve().parent / "results"
 N_STEPS = {"CartPole-v1": 10, "Acrobot-v1": 5}
@@ -70,32 +77,80 @@ def make_models(env_id: str, k: int) -> list[NStepSARSA]:
     ]
 
 
-def timed(make: Callable[[], list[Any]], steps: int) -> tuple[float, float]:
+def timed(make: Callable[[], list[Any]], steps: int) -> tuple[float, float, float]:
     """
-    :param make: builds the K members (called twice: once for each way of training them)
+    :param make: builds the K members (called three times: once for each way of training them, and once more for
+        the floor)
     :param steps: env steps per seed
-    :return: CPU seconds of the K seeds one after the other, and in lockstep
+    :return: CPU seconds of the K seeds one after the other, in lockstep, and the floor of lockstep (``floor``)
     """
     models: list[BaseAlgorithm] = make()
     start = time.process_time()
     for model in models:
         model.learn(steps)
     separate = time.process_time() - start
-    models = make()
     start = time.process_time()
+    train_in_lockstep(make(), steps)
+    lockstep = time.process_time() - start
+    return separate, lockstep, floor(make(), steps)
+
+
+def train_in_lockstep(models: list[Any], steps: int) -> None:
+    """Train ``models`` as one population (``REINFORCEPopulation`` or ``NStepSARSAPopulation``) for ``steps`` each."""
     if isinstance(models[0], REINFORCE):
-        REINFORCEPopulation(models).learn(steps)  # type: ignore[arg-type]
+        REINFORCEPopulation(models).learn(steps)
     else:
-        NStepSARSAPopulation(models).learn(steps)  # type: ignore[arg-type]
-    return separate, time.process_time() - start
+        NStepSARSAPopulation(models).learn(steps)
+
+
+#: The stacked calls of the populations: their forward passes for the members' actions and their gradient steps
+STACKED_CALLS = (
+    (sarsa_lockstep._LockstepTrainer, "q_values"),
+    (sarsa_lockstep._LockstepTrainer, "step"),
+    (reinforce_lockstep._LockstepTrainer, "logits"),
+    (reinforce_lockstep._LockstepTrainer, "step"),
+)
+
+
+def floor(models: list[Any], steps: int) -> float:
+    """
+    The part of a lockstep run that no change to the members' own rollout code could remove: the populations' stacked
+    calls (``STACKED_CALLS``: the forward passes that choose the members' actions and the stacked gradient steps, as
+    they are) and the members' envs (SB3's ``DummyVecEnv.step_wait``: Monitor, Gymnasium's wrappers, the env, its reset
+    at an episode's end). The rest of a member's env step (its ε-greedy draw or action sample, its buffer, its update's
+    windows and targets, its logger and callbacks) is its own code, run as in its separate run. The separate runs'
+    seconds over this floor bound the ratio that lockstep could reach with that code free.
+
+    :param models: the K members, untrained
+    :param steps: env steps per seed
+    :return: CPU seconds of the stacked calls and the envs, in one lockstep run of ``models`` (the clock's own calls,
+        about a microsecond each, included)
+    """
+    seconds = [0.0]
+
+    def clocked(function: Callable[..., Any]) -> Callable[..., Any]:
+        def call(*args: Any, **kwargs: Any) -> Any:
+            start = time.process_time()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                seconds[0] += time.process_time() - start
+
+        return call
+
+    with ExitStack() as stack:
+        for owner, name in (*STACKED_CALLS, (DummyVecEnv, "step_wait")):
+            stack.enter_context(mock.patch.object(owner, name, clocked(getattr(owner, name))))
+        train_in_lockstep(models, steps)
+    return seconds[0]
 
 
 def per_step_rows(env_ids: list[str], k: int, steps: int) -> list[dict[str, Any]]:
     """:return: the rows of the per-step setting, one per env"""
     rows = []
     for env_id in env_ids:
-        separate, lockstep = timed(lambda env_id=env_id: make_models(env_id, k), steps)  # type: ignore[misc]
-        rows.append(row("NStepSARSA", env_id, f"{SETTING}, n_steps {N_STEPS[env_id]}", k, steps, separate, lockstep))
+        seconds = timed(lambda env_id=env_id: make_models(env_id, k), steps)  # type: ignore[misc]
+        rows.append(row("NStepSARSA", env_id, f"{SETTING}, n_steps {N_STEPS[env_id]}", k, steps, seconds))
     return rows
 
 
@@ -143,8 +198,8 @@ def batch_rows(env_ids: list[str], k: int, steps: int) -> list[dict[str, Any]]:
             f"batch: hyperparams/nstep_sarsa.yml's {env_id} entry (n_envs {n_envs}, train_freq {hyperparams['train_freq']}, "
             f"gradient_steps {hyperparams['gradient_steps']}, 2x256 MLP)"
         )
-        separate, lockstep = timed(lambda env_id=env_id: make_yaml_models(env_id, k), steps)  # type: ignore[misc]
-        rows.append(row("NStepSARSA", env_id, setting, k, steps, separate, lockstep))
+        seconds = timed(lambda env_id=env_id: make_yaml_models(env_id, k), steps)  # type: ignore[misc]
+        rows.append(row("NStepSARSA", env_id, setting, k, steps, seconds))
     return rows
 
 
@@ -191,17 +246,27 @@ def reinforce_rows(family: str, env_ids: list[str], k: int, steps: int) -> list[
     for env_id, setting, kwargs in reinforce_settings():
         if env_id not in env_ids or not setting.startswith(family):
             continue
-        separate, lockstep = timed(lambda env_id=env_id, kwargs=kwargs: make_reinforce_models(env_id, k, kwargs), steps)  # type: ignore[misc]
-        rows.append(row("REINFORCE", env_id, setting, k, steps, separate, lockstep))
+        seconds = timed(lambda env_id=env_id, kwargs=kwargs: make_reinforce_models(env_id, k, kwargs), steps)  # type: ignore[misc]
+        rows.append(row("REINFORCE", env_id, setting, k, steps, seconds))
     return rows
 
 
-def row(algo: str, env_id: str, setting: str, k: int, steps: int, separate: float, lockstep: float) -> dict[str, Any]:
-    """:return: a row of the CSV (``steps`` is kept for the table, not written to the CSV), printed as it is made"""
+def row(algo: str, env_id: str, setting: str, k: int, steps: int, seconds: tuple[float, float, float]) -> dict[str, Any]:
+    """
+    :param seconds: ``timed``'s: one after the other, in lockstep, lockstep's floor
+    :return: a row of the CSV (``steps`` and ``floor_cpu_s`` are kept for the page, not written to the CSV), printed
+        as it is made
+    """
+    separate, lockstep, floor_s = seconds
     print(f"{algo} {env_id}, {setting.split(':')[0]}: separate {separate:.2f} s, lockstep {lockstep:.2f} s, "
-          f"{separate / lockstep:.2f}x", flush=True)  # fmt: skip
+          f"{separate / lockstep:.2f}x (floor {floor_s:.2f} s, at most {separate / floor_s:.2f}x)", flush=True)  # fmt: skip
     return dict(algo=algo, env_id=env_id, setting=setting, k=k, separate_cpu_s=f"{separate:.2f}",
-                lockstep_cpu_s=f"{lockstep:.2f}", steps=steps)  # fmt: skip
+                lockstep_cpu_s=f"{lockstep:.2f}", steps=steps, floor_cpu_s=f"{floor_s:.2f}")  # fmt: skip
+
+
+def ratio(seconds: str, other: str) -> str:
+    """:return: ``seconds`` over ``other`` (the CSV's text), as the page writes it; a dash where ``other`` rounds to 0"""
+    return f"{float(seconds) / float(other):.2f}×" if float(other) else "—"
 
 
 def cpu_model() -> str:
@@ -258,7 +323,8 @@ def main(argv: list[str] | None = None) -> None:
     table = "\n".join(
         f"| {row['algo']} | {row['env_id']} | {row['setting'].split(':')[0]} | {row['k']} | {row['steps']} | "
         f"{row['separate_cpu_s']} | "
-        f"{row['lockstep_cpu_s']} | {float(row['separate_cpu_s']) / float(row['lockstep_cpu_s']):.2f}× |"
+        f"{row['lockstep_cpu_s']} | {ratio(row['separate_cpu_s'], row['lockstep_cpu_s'])} | "
+        f"{row['floor_cpu_s']} | {ratio(row['separate_cpu_s'], row['floor_cpu_s'])} |"
         for row in rows
     )
     settings = "\n".join(f"- {row['algo']}, {row['env_id']}, {row['setting']}" for row in rows)
@@ -275,32 +341,27 @@ CPU seconds (`time.process_time`) of training only, one process, one PyTorch thr
 Machine: {cpu_model()}, {os.cpu_count()} logical CPUs, Python {platform.python_version()}, torch {th.__version__}. The
 ratios depend on the CPU (its matrix products against its Python overhead): compare code on one machine.
 
-| algorithm | env | setting | K | env steps per seed | one after the other (s) | lockstep (s) | ratio |
-|---|---|---|---|---|---|---|---|
+| algorithm | env | setting | K | env steps per seed | one after the other (s) | lockstep (s) | ratio | floor (s) | at most |
+|---|---|---|---|---|---|---|---|---|---|
 {table}
 
-Where the time goes (cProfile of 10 members in lockstep, one thread). Per-step setting on CartPole-v1, 1,500 env
-steps each: 40% in the members' rollout steps, of which under half is their envs (SB3's `DummyVecEnv` copying its
-infos and observations, Monitor, Gymnasium's wrappers; CartPole's own `step` is a quarter of the envs' time), a quarter
-in the stacked gradient steps (one per env step), an eighth in the stacked forward passes that choose the actions
-(about four per gradient step: at an episode's start a member takes its first n − 1 env steps before the others' next
-gradient step, each with a forward pass), and the rest in each member's own work (the start of its update and its
-n-step targets, its ε-greedy draw, its windows and logger). Without the profiler, lockstep takes about 230 µs per member
-and env step against 700 µs for a run alone; about 150 µs of the 230 is each member's own Python work, which lockstep
-does not share. A ratio of 5 needs 140 µs: less than that work alone, so it would take the members' envs and rollout
-bookkeeping stepped as arrays across members (a vectorised env and rollout loop in place of SB3's VecEnv and the
-algorithm's own loop), not a faster shared step.
+*Floor*: in a third run of the same population, the CPU seconds of the stacked calls (the forward passes that choose
+the members' actions and the stacked gradient steps) and of the members' envs (SB3's `DummyVecEnv.step_wait`: Monitor,
+Gymnasium's wrappers, the env and its resets). The rest of a lockstep run is each member's own code per env step, run
+as in its separate run, which is what makes a member its separate run: its ε-greedy draw or action sample, its buffer,
+its update's windows and targets, its logger and callbacks. *At most*: one after the other over the floor, the ratio
+lockstep would reach were that code of the members' free. A ratio above it would take a cheaper stacked step or the
+members' envs stepped as arrays across members (a vectorised env in place of each member's `VecEnv`).
 
-Batch settings, 8,192 env steps each: half in the stacked gradient steps, and those are bound by arithmetic: a stacked
-forward and backward pass of ten 2 × 256 networks at batches of 128 takes 5.7 ms on one thread, the ten networks' own
-5.4 ms, so stacking saves the per-call overhead of the rollouts' forward passes and of Adam, not the gradients'
-arithmetic. The rest is the members' envs (on Acrobot-v1, its physics' Runge-Kutta integration is a third of the
-profiled time) and their rollout loops, each member's own.
-
-REINFORCE's batch mode shares the forward pass of the rollouts; its updates, one per episode and member, seldom fall
-on the same env step, so most stacked gradient steps train one member, and each member's own work per env step (its
-env and VecEnv, the rollout loop's bookkeeping) is most of the time. The per-step mode trains an episode's T steps one
-stacked gradient step at a time while the other members go on with theirs, and shares those steps too.
+Where the floor goes. In the per-step settings, one stacked gradient step per env step, and, for SARSA, about four
+stacked forward passes per gradient step: at an episode's start a member takes its first n − 1 env steps before the
+others' next gradient step, each with a forward pass. In the batch settings, SARSA's stacked gradient steps through
+2 × 256 layers on batches of about 128 transitions are bound by arithmetic: stacked, a forward and backward pass costs
+what the ten networks' own passes cost, so lockstep saves the per-call overhead of the rollouts' forward passes and of
+Adam, not the gradients' arithmetic; on Acrobot-v1 the envs add their physics' four Runge-Kutta stages per step.
+REINFORCE's batch updates, one per episode and member, seldom fall on the same env step, so most of its stacked
+gradient steps train one member; what it shares is the rollouts' forward passes. Its per-step mode trains an episode's
+T steps one stacked gradient step at a time while the other members go on with theirs, and shares those steps too.
 """
     )
 

@@ -1,7 +1,10 @@
 """The lockstep benchmark (``benchmarks/lockstep.py``): its command writes the comparison in the committed format."""
 
 import csv
+import time
 from pathlib import Path
+
+from stable_baselines3.common.vec_env import DummyVecEnv
 
 from benchmarks import lockstep
 
@@ -23,7 +26,26 @@ def test_the_benchmark_writes_one_row_per_algorithm_env_and_setting(tmp_path: Pa
     assert all(float(row["separate_cpu_s"]) > 0 and float(row["lockstep_cpu_s"]) > 0 for row in rows)
     page = (tmp_path / "lockstep.md").read_text()
     assert "python -m benchmarks.lockstep --k 2 --steps 60" in page
-    assert page.count("| CartPole-v1 |") == 4
+    table = [line.split(" | ") for line in page.splitlines() if line.startswith(("| NStepSARSA |", "| REINFORCE |"))]
+    assert [line[1] for line in table] == ["CartPole-v1"] * 4
+    for line, row in zip(table, rows, strict=True):
+        # one after the other, lockstep, ratio, floor, at most: the CSV's seconds, and the floor's ratio
+        assert line[5:7] == [row["separate_cpu_s"], row["lockstep_cpu_s"]]
+        assert float(line[8]) > 0
+        assert line[9] == f"{float(row['separate_cpu_s']) / float(line[8]):.2f}× |"
+
+
+def test_the_floor_is_part_of_a_lockstep_run_and_leaves_the_clocked_methods_as_they_were() -> None:
+    clocked = (*lockstep.STACKED_CALLS, (DummyVecEnv, "step_wait"))
+    before = [owner.__dict__[name] for owner, name in clocked]
+    models = lockstep.make_models("CartPole-v1", 2)
+    start = time.process_time()
+    floor = lockstep.floor(models, 200)
+    whole = time.process_time() - start
+    assert 0 < floor < whole
+    assert all(model.num_timesteps == 200 for model in models)
+    # the clock is taken off again: what runs afterwards is the methods themselves
+    assert [owner.__dict__[name] for owner, name in clocked] == before
 
 
 def test_the_committed_comparison_has_a_row_per_algorithm_env_and_setting_of_ten_seeds() -> None:
