@@ -12,10 +12,11 @@ settings (``--settings``) per algorithm (``--algo``):
   and of ``hyperparams/reinforce.yml`` (one env, one Adam step per episode).
 
     python -m benchmarks.lockstep                       # writes benchmarks/results/lockstep.{csv,md}
-    python -m benchmarks.lockstep --k 10 --steps 3000 --settings per_step
+    python -m benchmarks.lockstep --k 10 --steps 3000 --settings per_step --repeats 1
     python -m benchmarks.lockstep --k 10 --batch-steps 20000 --settings batch --algo REINFORCE
 
-Seconds are ``time.process_time`` of training only (the models are built before the clock starts).
+Seconds are ``time.process_time`` of training only (the models are built before the clock starts), the median of
+``--repeats`` timings of each way (3 by default).
 Each row also gives lockstep's floor (``floor``): in a third run of the population, the seconds of its stacked calls and
 the members' envs, what lockstep would take were each member's own rollout code free.
 """
@@ -25,6 +26,7 @@ import csv
 import os
 import platform
 import shlex
+import statistics
 import sys
 import time
 from collections.abc import Callable
@@ -77,22 +79,28 @@ def make_models(env_id: str, k: int) -> list[NStepSARSA]:
     ]
 
 
-def timed(make: Callable[[], list[Any]], steps: int) -> tuple[float, float, float]:
+def timed(make: Callable[[], list[Any]], steps: int, repeats: int) -> tuple[float, float, float]:
     """
-    :param make: builds the K members (called three times: once for each way of training them, and once more for
-        the floor)
+    :param make: builds the K members (called three times per repeat: once for each way of training them, and once
+        more for the floor)
     :param steps: env steps per seed
-    :return: CPU seconds of the K seeds one after the other, in lockstep, and the floor of lockstep (``floor``)
+    :param repeats: how many times to time each of the three (the machine's noise: the medians are kept)
+    :return: the medians of the CPU seconds of the K seeds one after the other, in lockstep, and of lockstep's floor
+        (``floor``)
     """
-    models: list[BaseAlgorithm] = make()
-    start = time.process_time()
-    for model in models:
-        model.learn(steps)
-    separate = time.process_time() - start
-    start = time.process_time()
-    train_in_lockstep(make(), steps)
-    lockstep = time.process_time() - start
-    return separate, lockstep, floor(make(), steps)
+    times: list[tuple[float, float, float]] = []
+    for _ in range(repeats):
+        models: list[BaseAlgorithm] = make()
+        start = time.process_time()
+        for model in models:
+            model.learn(steps)
+        separate = time.process_time() - start
+        models = make()
+        start = time.process_time()
+        train_in_lockstep(models, steps)
+        times.append((separate, time.process_time() - start, floor(make(), steps)))
+    separate, lockstep, floor_s = (statistics.median(column) for column in zip(*times, strict=True))
+    return separate, lockstep, floor_s
 
 
 def train_in_lockstep(models: list[Any], steps: int) -> None:
@@ -103,11 +111,13 @@ def train_in_lockstep(models: list[Any], steps: int) -> None:
         NStepSARSAPopulation(models).learn(steps)
 
 
-#: The stacked calls of the populations: their forward passes for the members' actions and their gradient steps
-STACKED_CALLS = (
+#: The stacked calls of the populations: their forward passes for the members' actions (REINFORCE's with the softmax
+#: of its logits) and their gradient steps
+STACKED_CALLS: tuple[tuple[Any, str], ...] = (
     (sarsa_lockstep._LockstepTrainer, "q_values"),
     (sarsa_lockstep._LockstepTrainer, "step"),
     (reinforce_lockstep._LockstepTrainer, "logits"),
+    (reinforce_lockstep, "softmax_cdf"),
     (reinforce_lockstep._LockstepTrainer, "step"),
 )
 
@@ -118,7 +128,8 @@ def floor(models: list[Any], steps: int) -> float:
     calls (``STACKED_CALLS``: the forward passes that choose the members' actions and the stacked gradient steps, as
     they are) and the members' envs (SB3's ``DummyVecEnv.step_wait``: Monitor, Gymnasium's wrappers, the env, its reset
     at an episode's end). The rest of a member's env step (its ε-greedy draw or action sample, its buffer, its update's
-    windows and targets, its logger and callbacks) is its own code, run as in its separate run. The separate runs'
+    windows and targets with their bootstrap values, the moves of its copies of q̂, its logger and callbacks) is its own
+    code, run as in its separate run. The separate runs'
     seconds over this floor bound the ratio that lockstep could reach with that code free.
 
     :param models: the K members, untrained
@@ -145,11 +156,11 @@ def floor(models: list[Any], steps: int) -> float:
     return seconds[0]
 
 
-def per_step_rows(env_ids: list[str], k: int, steps: int) -> list[dict[str, Any]]:
+def per_step_rows(env_ids: list[str], k: int, steps: int, repeats: int) -> list[dict[str, Any]]:
     """:return: the rows of the per-step setting, one per env"""
     rows = []
     for env_id in env_ids:
-        seconds = timed(lambda env_id=env_id: make_models(env_id, k), steps)  # type: ignore[misc]
+        seconds = timed(lambda env_id=env_id: make_models(env_id, k), steps, repeats)  # type: ignore[misc]
         rows.append(row("NStepSARSA", env_id, f"{SETTING}, n_steps {N_STEPS[env_id]}", k, steps, seconds))
     return rows
 
@@ -189,7 +200,7 @@ def make_yaml_models(env_id: str, k: int) -> list[NStepSARSA]:
     ]
 
 
-def batch_rows(env_ids: list[str], k: int, steps: int) -> list[dict[str, Any]]:
+def batch_rows(env_ids: list[str], k: int, steps: int, repeats: int) -> list[dict[str, Any]]:
     """:return: the rows of the YAML's batch-mode entries, one per env"""
     rows = []
     for env_id in env_ids:
@@ -198,7 +209,7 @@ def batch_rows(env_ids: list[str], k: int, steps: int) -> list[dict[str, Any]]:
             f"batch: hyperparams/nstep_sarsa.yml's {env_id} entry (n_envs {n_envs}, train_freq {hyperparams['train_freq']}, "
             f"gradient_steps {hyperparams['gradient_steps']}, 2x256 MLP)"
         )
-        seconds = timed(lambda env_id=env_id: make_yaml_models(env_id, k), steps)  # type: ignore[misc]
+        seconds = timed(lambda env_id=env_id: make_yaml_models(env_id, k), steps, repeats)  # type: ignore[misc]
         rows.append(row("NStepSARSA", env_id, setting, k, steps, seconds))
     return rows
 
@@ -240,13 +251,13 @@ def make_reinforce_models(env_id: str, k: int, kwargs: dict[str, Any]) -> list[R
     return [REINFORCE("MlpPolicy", make_vec_env(env_id, n_envs=1, seed=seed), seed=seed, **kwargs) for seed in range(k)]
 
 
-def reinforce_rows(family: str, env_ids: list[str], k: int, steps: int) -> list[dict[str, Any]]:
+def reinforce_rows(family: str, env_ids: list[str], k: int, steps: int, repeats: int) -> list[dict[str, Any]]:
     """:return: the REINFORCE rows of one family of settings (``per_step`` or ``batch``) on the given envs"""
     rows = []
     for env_id, setting, kwargs in reinforce_settings():
         if env_id not in env_ids or not setting.startswith(family):
             continue
-        seconds = timed(lambda env_id=env_id, kwargs=kwargs: make_reinforce_models(env_id, k, kwargs), steps)  # type: ignore[misc]
+        seconds = timed(lambda env_id=env_id, kwargs=kwargs: make_reinforce_models(env_id, k, kwargs), steps, repeats)  # type: ignore[misc]
         rows.append(row("REINFORCE", env_id, setting, k, steps, seconds))
     return rows
 
@@ -254,8 +265,7 @@ def reinforce_rows(family: str, env_ids: list[str], k: int, steps: int) -> list[
 def row(algo: str, env_id: str, setting: str, k: int, steps: int, seconds: tuple[float, float, float]) -> dict[str, Any]:
     """
     :param seconds: ``timed``'s: one after the other, in lockstep, lockstep's floor
-    :return: a row of the CSV (``steps`` and ``floor_cpu_s`` are kept for the page, not written to the CSV), printed
-        as it is made
+    :return: a row of the CSV (``steps`` is kept for the page, not written to the CSV), printed as it is made
     """
     separate, lockstep, floor_s = seconds
     print(f"{algo} {env_id}, {setting.split(':')[0]}: separate {separate:.2f} s, lockstep {lockstep:.2f} s, "
@@ -296,6 +306,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--batch-steps", type=positive_int, default=20000, help="env steps per seed (all its envs) of the batch settings"
     )
+    parser.add_argument(
+        "--repeats", type=positive_int, default=3, help="times each way is timed; the medians are reported (default 3)"
+    )
     parser.add_argument("--env", nargs="+", default=list(N_STEPS), choices=list(N_STEPS))
     parser.add_argument(
         "--settings", type=settings_list, default=list(SETTINGS), help=f"comma-separated, of {', '.join(SETTINGS)}"
@@ -306,15 +319,15 @@ def main(argv: list[str] | None = None) -> None:
     th.set_num_threads(1)
     rows = []
     if "NStepSARSA" in args.algo and "per_step" in args.settings:
-        rows += per_step_rows(args.env, args.k, args.steps)
+        rows += per_step_rows(args.env, args.k, args.steps, args.repeats)
     if "NStepSARSA" in args.algo and "batch" in args.settings:
-        rows += batch_rows(args.env, args.k, args.batch_steps)
+        rows += batch_rows(args.env, args.k, args.batch_steps, args.repeats)
     if "REINFORCE" in args.algo and "per_step" in args.settings:
-        rows += reinforce_rows("per_step", args.env, args.k, args.steps)
+        rows += reinforce_rows("per_step", args.env, args.k, args.steps, args.repeats)
     if "REINFORCE" in args.algo and "batch" in args.settings:
-        rows += reinforce_rows("batch", args.env, args.k, args.batch_steps)
+        rows += reinforce_rows("batch", args.env, args.k, args.batch_steps, args.repeats)
     args.out.mkdir(parents=True, exist_ok=True)
-    columns = ["algo", "env_id", "setting", "k", "separate_cpu_s", "lockstep_cpu_s"]
+    columns = ["algo", "env_id", "setting", "k", "separate_cpu_s", "lockstep_cpu_s", "floor_cpu_s"]
     with open(args.out / "lockstep.csv", "w", newline="") as file:
         writer = csv.DictWriter(file, fieldnames=columns, extrasaction="ignore")
         writer.writeheader()
@@ -328,11 +341,12 @@ def main(argv: list[str] | None = None) -> None:
         for row in rows
     )
     settings = "\n".join(f"- {row['algo']}, {row['env_id']}, {row['setting']}" for row in rows)
+    timings = f"the median of {args.repeats} timings of each way" if args.repeats > 1 else "one timing of each way"
     (args.out / "lockstep.md").write_text(
         f"""# K seeds in lockstep against one after the other
 
 CPU seconds (`time.process_time`) of training only, one process, one PyTorch thread
-(OMP_NUM_THREADS={os.environ.get("OMP_NUM_THREADS", "unset")}). The settings:
+(OMP_NUM_THREADS={os.environ.get("OMP_NUM_THREADS", "unset")}), {timings}. The settings:
 
 {settings}
 
@@ -349,9 +363,10 @@ ratios depend on the CPU (its matrix products against its Python overhead): comp
 the members' actions and the stacked gradient steps) and of the members' envs (SB3's `DummyVecEnv.step_wait`: Monitor,
 Gymnasium's wrappers, the env and its resets). The rest of a lockstep run is each member's own code per env step, run
 as in its separate run, which is what makes a member its separate run: its ε-greedy draw or action sample, its buffer,
-its update's windows and targets, its logger and callbacks. *At most*: one after the other over the floor, the ratio
-lockstep would reach were that code of the members' free. A ratio above it would take a cheaper stacked step or the
-members' envs stepped as arrays across members (a vectorised env in place of each member's `VecEnv`).
+its update's windows and targets with their bootstrap values, the moves of its copies of q̂, its logger and callbacks.
+*At most*: one after the other over the floor, the ratio lockstep would reach were that code of the members' free. A
+ratio above it would take a cheaper stacked step or the members' envs stepped as arrays across members (a vectorised
+env in place of each member's `VecEnv`).
 
 Where the floor goes. In the per-step settings, one stacked gradient step per env step, and, for SARSA, about four
 stacked forward passes per gradient step: at an episode's start a member takes its first n − 1 env steps before the

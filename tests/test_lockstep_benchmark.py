@@ -2,17 +2,25 @@
 
 import csv
 import time
+from collections import Counter
+from collections.abc import Callable
+from contextlib import ExitStack
 from pathlib import Path
+from typing import Any
+from unittest import mock
 
+import pytest
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from benchmarks import lockstep
 
-COLUMNS = ["algo", "env_id", "setting", "k", "separate_cpu_s", "lockstep_cpu_s"]
+COLUMNS = ["algo", "env_id", "setting", "k", "separate_cpu_s", "lockstep_cpu_s", "floor_cpu_s"]
 
 
 def test_the_benchmark_writes_one_row_per_algorithm_env_and_setting(tmp_path: Path) -> None:
-    lockstep.main(["--k", "2", "--steps", "60", "--batch-steps", "300", "--env", "CartPole-v1", "--out", str(tmp_path)])
+    lockstep.main(
+        ["--k", "2", "--steps", "60", "--batch-steps", "300", "--env", "CartPole-v1", "--repeats", "2", "--out", str(tmp_path)]
+    )
     with open(tmp_path / "lockstep.csv", newline="") as file:
         rows = list(csv.DictReader(file))
     assert list(rows[0]) == COLUMNS
@@ -29,23 +37,49 @@ def test_the_benchmark_writes_one_row_per_algorithm_env_and_setting(tmp_path: Pa
     table = [line.split(" | ") for line in page.splitlines() if line.startswith(("| NStepSARSA |", "| REINFORCE |"))]
     assert [line[1] for line in table] == ["CartPole-v1"] * 4
     for line, row in zip(table, rows, strict=True):
-        # one after the other, lockstep, ratio, floor, at most: the CSV's seconds, and the floor's ratio
-        assert line[5:7] == [row["separate_cpu_s"], row["lockstep_cpu_s"]]
-        assert float(line[8]) > 0
-        assert line[9] == f"{float(row['separate_cpu_s']) / float(line[8]):.2f}× |"
+        # one after the other, lockstep, ratio, floor, at most: the CSV's seconds and their ratios
+        assert line[5:9] == [row["separate_cpu_s"], row["lockstep_cpu_s"], line[7], row["floor_cpu_s"]]
+        assert line[7] == lockstep.ratio(row["separate_cpu_s"], row["lockstep_cpu_s"])
+        assert line[9] == lockstep.ratio(row["separate_cpu_s"], row["floor_cpu_s"]) + " |"
 
 
-def test_the_floor_is_part_of_a_lockstep_run_and_leaves_the_clocked_methods_as_they_were() -> None:
+@pytest.mark.parametrize("algo", ["NStepSARSA", "REINFORCE"])
+def test_the_floor_clocks_each_stacked_call_and_env_step_once_and_leaves_them_as_they_were(algo: str) -> None:
+    """Every clocked method is one the population calls, none inside another (no second count), and is restored."""
     clocked = (*lockstep.STACKED_CALLS, (DummyVecEnv, "step_wait"))
-    before = [owner.__dict__[name] for owner, name in clocked]
-    models = lockstep.make_models("CartPole-v1", 2)
-    start = time.process_time()
-    floor = lockstep.floor(models, 200)
-    whole = time.process_time() - start
+    before = [getattr(owner, name) for owner, name in clocked]
+    calls: Counter[str] = Counter()
+    depth = [0]
+
+    def counted(name: str, function: Callable[..., Any]) -> Callable[..., Any]:
+        def call(*args: Any, **kwargs: Any) -> Any:
+            assert depth[0] == 0, f"{name} called inside another clocked call"
+            calls[name] += 1
+            depth[0] += 1
+            try:
+                return function(*args, **kwargs)
+            finally:
+                depth[0] -= 1
+
+        return call
+
+    if algo == "NStepSARSA":
+        models: list[Any] = lockstep.make_models("CartPole-v1", 2)
+    else:
+        env_id, _, kwargs = next(s for s in lockstep.reinforce_settings() if s[1].startswith("per_step"))
+        models = lockstep.make_reinforce_models(env_id, 2, kwargs)
+    with ExitStack() as stack:
+        for owner, name in clocked:
+            stack.enter_context(mock.patch.object(owner, name, counted(name, getattr(owner, name))))
+        start = time.process_time()
+        floor = lockstep.floor(models, 200)
+        whole = time.process_time() - start
     assert 0 < floor < whole
-    assert all(model.num_timesteps == 200 for model in models)
+    assert all(model.num_timesteps >= 200 for model in models)  # (REINFORCE ends its last episode)
+    names = ["q_values", "step"] if algo == "NStepSARSA" else ["logits", "softmax_cdf", "step"]
+    assert all(calls[name] > 0 for name in [*names, "step_wait"]), calls
     # the clock is taken off again: what runs afterwards is the methods themselves
-    assert [owner.__dict__[name] for owner, name in clocked] == before
+    assert [getattr(owner, name) for owner, name in clocked] == before
 
 
 def test_the_committed_comparison_has_a_row_per_algorithm_env_and_setting_of_ten_seeds() -> None:
@@ -61,3 +95,20 @@ def test_the_committed_comparison_has_a_row_per_algorithm_env_and_setting_of_ten
         for setting in ("per_step", "batch")
     }
     assert all(row["k"] == "10" for row in rows)
+
+
+def test_each_way_is_timed_on_fresh_members_at_every_repeat_and_the_medians_kept() -> None:
+    built: list[list[Any]] = []
+
+    def make() -> list[Any]:
+        built.append(lockstep.make_models("CartPole-v1", 2))
+        return built[-1]
+
+    with mock.patch.object(lockstep, "floor", side_effect=[7.0, 2.0, 1.0]):
+        separate, in_lockstep, floor = lockstep.timed(make, 20, repeats=3)
+    assert floor == 2.0  # (not the first, last, mean, least or greatest)
+    assert separate > 0
+    assert in_lockstep > 0
+    # each repeat: members for the separate runs, for the population, for the floor (not trained here: it is stubbed)
+    assert len(built) == 9
+    assert [models[0].num_timesteps for models in built] == [20, 20, 0] * 3
