@@ -35,10 +35,9 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.logger import KVWriter, Logger
 
 import sb3_classic.envs  # noqa: F401  (registers the book's envs)
+from benchmarks.lockstep import population_of
 from sb3_classic import REINFORCE, NStepSARSA, TileCoding
 from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
-from sb3_classic.reinforce import REINFORCEPopulation
-from sb3_classic.sarsa import NStepSARSAPopulation
 
 SMALL_NET = dict(net_arch=[64, 64])
 
@@ -211,8 +210,7 @@ def population_digest(name: str) -> str:
         built = [POPULATIONS[name](seed) for seed in POPULATION_SEEDS]
         models, steps = [model for model, _ in built], built[0][1]
         train_logs = [logged(model) for model in models]
-        population = NStepSARSAPopulation if isinstance(models[0], NStepSARSA) else REINFORCEPopulation
-        population(models).learn(steps, log_interval=1)  # type: ignore[arg-type]
+        population_of(models).learn(steps, log_interval=1)
         hasher = hashlib.sha256()
         for model, train_log in zip(models, train_logs, strict=True):
             hasher.update(digest(model, train_log.dumps).encode())

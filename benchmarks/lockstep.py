@@ -97,18 +97,15 @@ def timed(make: Callable[[], list[Any]], steps: int, repeats: int) -> tuple[floa
         separate = time.process_time() - start
         models = make()
         start = time.process_time()
-        train_in_lockstep(models, steps)
+        population_of(models).learn(steps)
         times.append((separate, time.process_time() - start, floor(make(), steps)))
     separate, lockstep, floor_s = (statistics.median(column) for column in zip(*times, strict=True))
     return separate, lockstep, floor_s
 
 
-def train_in_lockstep(models: list[Any], steps: int) -> None:
-    """Train ``models`` as one population (``REINFORCEPopulation`` or ``NStepSARSAPopulation``) for ``steps`` each."""
-    if isinstance(models[0], REINFORCE):
-        REINFORCEPopulation(models).learn(steps)
-    else:
-        NStepSARSAPopulation(models).learn(steps)
+def population_of(models: list[Any]) -> REINFORCEPopulation | NStepSARSAPopulation:
+    """:return: ``models`` as one population of their algorithm (``REINFORCEPopulation`` or ``NStepSARSAPopulation``)"""
+    return REINFORCEPopulation(models) if isinstance(models[0], REINFORCE) else NStepSARSAPopulation(models)
 
 
 #: The stacked calls of the populations: their forward passes for the members' actions (REINFORCE's with the softmax
@@ -120,6 +117,8 @@ STACKED_CALLS: tuple[tuple[Any, str], ...] = (
     (reinforce_lockstep, "softmax_cdf"),
     (reinforce_lockstep._LockstepTrainer, "step"),
 )
+#: What ``floor`` clocks: the stacked calls and the members' envs
+CLOCKED: tuple[tuple[Any, str], ...] = (*STACKED_CALLS, (DummyVecEnv, "step_wait"))
 
 
 def floor(models: list[Any], steps: int) -> float:
@@ -129,8 +128,8 @@ def floor(models: list[Any], steps: int) -> float:
     they are) and the members' envs (SB3's ``DummyVecEnv.step_wait``: Monitor, Gymnasium's wrappers, the env, its reset
     at an episode's end). The rest of a member's env step (its ε-greedy draw or action sample, its buffer, its update's
     windows and targets with their bootstrap values, the moves of its copies of q̂, its logger and callbacks) is its own
-    code, run as in its separate run. The separate runs'
-    seconds over this floor bound the ratio that lockstep could reach with that code free.
+    code, run as in its separate run. The separate runs' seconds over this floor bound the ratio that lockstep could
+    reach with that code free.
 
     :param models: the K members, untrained
     :param steps: env steps per seed
@@ -150,9 +149,9 @@ def floor(models: list[Any], steps: int) -> float:
         return call
 
     with ExitStack() as stack:
-        for owner, name in (*STACKED_CALLS, (DummyVecEnv, "step_wait")):
+        for owner, name in CLOCKED:
             stack.enter_context(mock.patch.object(owner, name, clocked(getattr(owner, name))))
-        train_in_lockstep(models, steps)
+        population_of(models).learn(steps)
     return seconds[0]
 
 

@@ -8,6 +8,7 @@ import pytest
 import torch as th
 
 from benchmarks import digest as digest_tool
+from benchmarks.lockstep import population_of
 from sb3_classic import NStepSARSA
 
 
@@ -69,8 +70,7 @@ def test_the_populations_cover_both_algorithms_and_both_update_modes_in_lockstep
     for name, make in digest_tool.POPULATIONS.items():
         models = [make(seed)[0] for seed in digest_tool.POPULATION_SEEDS]
         # (a population's own check: a setting it does not cover would train alone, not in lockstep)
-        population = digest_tool.NStepSARSAPopulation if isinstance(models[0], NStepSARSA) else digest_tool.REINFORCEPopulation
-        population(models)  # type: ignore[arg-type]
+        population_of(models)
         assert [model.seed for model in models] == list(digest_tool.POPULATION_SEEDS), name
         modes.add((type(models[0]).__name__, models[0].update_mode))
     assert modes == {("NStepSARSA", "batch"), ("NStepSARSA", "per_step"), ("REINFORCE", "batch"), ("REINFORCE", "per_step")}
