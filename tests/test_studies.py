@@ -32,7 +32,7 @@ from sb3_classic.harness import pool
 from sb3_classic.harness.common import RunSpec, code_versions
 from sb3_classic.harness.runner import check_run, execute_run
 from sb3_classic.studies import cli as studies_cli
-from sb3_classic.studies import outputs, stats
+from sb3_classic.studies import outputs, stats, untrained
 from sb3_classic.studies.spec import STATED, Claim, StudyError, load_study, policy_kwargs_string
 
 TINY = """
@@ -188,6 +188,39 @@ def test_readings_reinterpret_only_the_settings_a_variant_has(tmp_path: Path) ->
         (("kind: better", "kind: reaches, value: 1000"), ["claim.value: 1000: CartPole-v1's returns lie in [1, 500]"]),
         # Not a number: its own message only (it said too that "every seed reaches" nan)
         (("threshold_window: 3", "threshold_window: 3\nthreshold: abc"), ["threshold: 'abc': give the return"]),
+        # An env of one's own: how to register it, and Gymnasium's module:EnvId form (it was "not a registered
+        # Gymnasium env" with no way shown)
+        (
+            ("env: CartPole-v1", "env: ShortChain-v0"),
+            ["env: 'ShortChain-v0' is not a registered Gymnasium env", "gymnasium.register(", "env: mychain:Chain-v0"],
+        ),
+        (
+            ("env: CartPole-v1", "env: no_such_module_here:Chain-v0"),
+            ["env: 'no_such_module_here:Chain-v0': its module 'no_such_module_here' cannot be imported", "PYTHONPATH"],
+        ),
+        (
+            ("env: CartPole-v1", "env: chain_env:Chain-v0"),
+            ["importing 'chain_env' registers no env 'Chain-v0'", "gymnasium.register(id='Chain-v0', entry_point=...)"],
+        ),
+        (("env: CartPole-v1", "env: a:b:Chain-v0"), ["env: 'a:b:Chain-v0': the id of a registered", "module:EnvId"]),
+        (
+            ("  policy: MlpPolicy", "  policy: MlpPolicy\n  env_kwargs: [3]"),
+            ["hyperparams.env_kwargs: [3]: a mapping of the env's keyword arguments"],
+        ),
+        # What rl-zoo3 reads when the run starts, read at load: "fast" passed --list and stopped the run with
+        # "ValueError: not enough values to unpack (expected 2, got 1)"
+        (
+            ("learning_rate: !!float 1e-3", "learning_rate: fast"),
+            ["hyperparams.learning_rate: 'fast': rl-zoo3 cannot read it (ValueError:", "a number", "lin_1e-3"],
+        ),
+        (("n3: {n_steps: 3,", "n3: {learning_rate: lin_fast, n_steps: 3,"), ["variants.n3.learning_rate: 'lin_fast'"]),
+        (("learning_rate: !!float 1e-3", "learning_rate: [0.1]"), ["hyperparams.learning_rate: [0.1]: rl-zoo3 cannot"]),
+        # The zoo reads any NAME_value as its linear schedule
+        (("learning_rate: !!float 1e-3", "learning_rate: exp_0.01"), ["'exp_0.01': rl-zoo3 reads every", "write lin_0.01"]),
+        (
+            ("  policy: MlpPolicy", "  policy: MlpPolicy\n  env_wrapper: gymnasium.wrappers.NoSuchWrapper"),
+            ["hyperparams.env_wrapper: 'gymnasium.wrappers.NoSuchWrapper': rl-zoo3 cannot read it", "module.Class"],
+        ),
     ],
 )
 def test_study_file_errors_name_the_field_and_the_fix(tmp_path: Path, change: tuple[str, str], expected: list[str]) -> None:
@@ -202,6 +235,23 @@ def test_study_file_errors_name_the_field_and_the_fix(tmp_path: Path, change: tu
         assert part in message
     # One message per problem: a threshold that is not a number was also said to lie outside the env's returns
     assert sum(line.strip().startswith("threshold:") for line in message.splitlines()) <= 1
+
+
+def test_hyperparameters_load_as_the_zoo_reads_them(tmp_path: Path) -> None:
+    # The zoo's schedules and wrappers, and a variant's env_kwargs merged key by key into the base's
+    text = TINY.replace("learning_rate: !!float 1e-3", "learning_rate: lin_1e-3\n  env_kwargs: {sutton_barto_reward: true}")
+    text = text.replace("n3: {n_steps: 3,", "n3: {env_kwargs: {max_episode_steps: 50}, n_steps: 3,")
+    study = load_study(write_study(tmp_path, text))
+    assert study.zoo_entry("n1")["learning_rate"] == "lin_1e-3"
+    assert study.zoo_entry("n3")["env_kwargs"] == {"sutton_barto_reward": True, "max_episode_steps": 50}
+    # The time limit of env_kwargs is the episode budget's cap: (6 episodes + 1 env) × 50 steps
+    assert study.zoo_entry("n3")["n_timesteps"] == 7 * 50
+    assert study.zoo_entry("n1")["n_timesteps"] == 7 * 500
+    # REINFORCE's second step size is read as the zoo reads learning_rate
+    reinforce = TINY.replace("algo: nstep_sarsa", "algo: reinforce").replace("  train_freq: 1\n  gradient_steps: 1\n", "")
+    reinforce = reinforce.replace("n1: {n_steps: 1}", "n1: {value_learning_rate: fast}").replace("n_steps: 3, ", "")
+    with pytest.raises(StudyError, match=re.escape("variants.n1.value_learning_rate: 'fast': rl-zoo3 cannot read it")):
+        load_study(write_study(tmp_path, reinforce, "reinforce.yml"))
 
 
 def test_a_variant_with_its_own_time_limit_may_have_a_threshold_beyond_the_envs(tmp_path: Path) -> None:
@@ -958,6 +1008,94 @@ def test_a_tiny_study_runs_end_to_end(tmp_path: Path) -> None:
     expected = shlex.join(["python", "-m", "benchmarks.studies", str(study_file)])
     assert json.loads((results / "tiny.json").read_text())["command"] == expected
     assert f"`{expected}`" in (results / "STUDIES.md").read_text()
+
+
+#: A study of an env of one's own (``tests/chain_env.py`` registers it when imported), with its env_kwargs
+CHAIN = """
+title: Chain
+env: chain_env:ShortChain-v0
+algo: nstep_sarsa
+seeds: 2
+budget: {episodes: 4}
+threshold: -3
+hyperparams:
+  policy: MlpPolicy
+  env_kwargs: {length: 3}
+  learning_rate: lin_1e-3
+  train_freq: 1
+  gradient_steps: 1
+  policy_kwargs: {net_arch: [8]}
+vary: {n_steps: [1, 2]}
+claim: {text: "n = 2 beats n = 1", kind: better, variant: n_steps=2, others: [n_steps=1]}
+threshold_window: 2
+"""
+
+
+def test_a_study_of_ones_own_env_runs_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # env: module:EnvId (Gymnasium's form) was refused as "not a registered Gymnasium env". The loader imports the
+    # module, and so does each process that builds the env: the pool's workers are fresh interpreters (spawn). The
+    # env_kwargs reach the training envs and the evaluation envs (the zoo gives a YAML's to the training envs only: a
+    # chain of 3 states evaluated on one of 4 failed on the observation's shape)
+    study_file = write_study(tmp_path, CHAIN, "chain.yml")
+    cache, results = tmp_path / "cache", tmp_path / "results"
+    command = [str(study_file), "--cache-dir", str(cache), "--results-dir", str(results)]
+    assert studies_cli.main([*command, "--workers", "1"]) == 0, capsys.readouterr().out
+    record = json.loads((results / "chain.json").read_text())
+    assert (record["env_id"], record["runs"], record["complete"]) == ("chain_env:ShortChain-v0", 4, True)
+    (verdict,) = record["claims"]
+    assert verdict["verdict"] in (stats.SUPPORTED, stats.REVERSED, stats.TOO_CLOSE)
+    for run in load_study(study_file).runs():
+        run_dir = run.spec.run_dir(cache)
+        # (no ':' in a folder's name)
+        assert run_dir.relative_to(cache).parts[:2] == ("ShortChain-v0", "nstep_sarsa")
+        assert len(pd.read_csv(run_dir / "episodes.csv")) == 4
+        # A deterministic policy on a chain of 3 states: it reaches the end in 2 steps, or never in its 20
+        assert set(pd.read_csv(run_dir / "evaluations.csv")["return"]) <= {-2.0, -20.0}
+    assert "A uniformly random policy's return on the env" in (results / "chain.md").read_text()
+    capsys.readouterr()
+    assert studies_cli.main([*command, "--list"]) == 0
+    assert "4 runs, 4 cached" in capsys.readouterr().out
+
+
+def test_a_verdict_between_variants_that_did_not_learn_says_so(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # Two variants at a random policy's return (CartPole-v1: about 25) were judged "supported" without a word. Each
+    # variant's 6 seeds: n1 at 20, n3 at 26 (n3 beats n1, but neither rose above chance), then n3 at 60
+    def page(n3: float) -> str:
+        text = TINY.replace("seeds: 2", "seeds: 6")
+        folder = tmp_path / str(n3)
+        folder.mkdir()
+        study_file, cache, results = fake_cache(folder, text)
+        for run in load_study(study_file).runs():
+            value = (n3 if run.variant == "n3" else 20.0) + run.seed / 10
+            (run.spec.run_dir(cache) / "episodes.csv").write_text("return\n" + f"{value}\n" * 6)
+        command = [str(study_file), "--report-only", "--cache-dir", str(cache), "--results-dir", str(results)]
+        assert studies_cli.main(command) == 0
+        (row,) = (line for line in (results / "STUDIES.md").read_text().splitlines() if "n = 3 beats n = 1" in line)
+        (claim,) = json.loads((results / "study.json").read_text())["claims"]
+        assert claim["verdict"] == stats.SUPPORTED
+        return "\n".join([(results / "study.md").read_text(), row, claim.get("untrained", ""), capsys.readouterr().out])
+
+    returns = untrained.random_returns("CartPole-v1")
+    assert returns is not None
+    level = stats.interval(returns)
+    # The premise: n1 below it, n3 within it
+    assert level.low > 20.3, level
+    assert 26.3 < level.high < 60, level
+    said = " ".join(page(26.0).split())
+    note = (
+        f"none of the 2 compared variants has a mean return over its last 100 episodes above a uniformly random policy's "
+        f"({level.format()}): the verdict compares runs that did not measurably learn"
+    )
+    assert "- **supported**: n = 3 beats n = 1. Measured: " in said
+    assert f"**Not learned**: {note}." in said  # the study's page
+    assert "| supported (not learned: no compared variant above a random policy's return) |" in said  # STUDIES.md
+    assert said.count(note) == 3  # and the json's record, and the command's output
+    assert f"A uniformly random policy's return on the env: {level.format()}" in said
+    # One variant above it: no note
+    learned = " ".join(page(60.0).split())
+    assert "**Not learned**:" not in learned
+    assert "not learned:" not in learned  # (STUDIES.md's row, the command's output)
+    assert "| supported |" in learned
 
 
 def test_the_threshold_defaults_to_gymnasiums(tmp_path: Path) -> None:

@@ -43,8 +43,44 @@ HARNESS_PACKAGES = ("harness", "studies")
 
 #: Keys of a zoo YAML entry that the zoo consumes itself (not constructor arguments)
 ZOO_KEYS = frozenset(
-    {"n_envs", "normalize", "normalize_kwargs", "env_wrapper", "vec_env_wrapper", "callback", "frame_stack", "policy"}
+    {
+        "n_envs",
+        "normalize",
+        "normalize_kwargs",
+        "env_wrapper",
+        "env_kwargs",
+        "vec_env_wrapper",
+        "callback",
+        "frame_stack",
+        "policy",
+    }
 )
+
+
+def split_env_id(env_id: str) -> tuple[str | None, str]:
+    """
+    :param env_id: a Gymnasium env id, or Gymnasium's ``module:EnvId`` form (the module registers the env when
+        imported, as in ``gymnasium.make("mychain:Chain-v0")``)
+    :return: the module to import (None for a plain id) and the id in Gymnasium's registry
+    """
+    module, colon, gym_id = env_id.partition(":")
+    return (module, gym_id) if colon else (None, env_id)
+
+
+def env_spec(env_id: str) -> gymnasium.envs.registration.EnvSpec:
+    """
+    The env's registration, after importing the module of a ``module:EnvId`` id (as ``gymnasium.make`` does): in
+    every process that builds the env (the pool's and Dask's workers too), the module registers it.
+
+    :param env_id: a Gymnasium env id, or ``module:EnvId``
+    :return: its ``EnvSpec``
+    :raise ImportError: if the module cannot be imported
+    :raise gymnasium.error.Error: if the id is not registered (after the import)
+    """
+    module, gym_id = split_env_id(env_id)
+    if module is not None:
+        importlib.import_module(module)
+    return gymnasium.spec(gym_id)
 
 
 def register_algorithms() -> None:
@@ -194,7 +230,8 @@ class RunSpec:
     One learning run: an algorithm on an env with one seed, for a step budget, evaluated periodically.
 
     :param algo: the algorithm (a key of ``LABELS``)
-    :param env_id: the Gymnasium env id
+    :param env_id: the Gymnasium env id, or ``module:EnvId`` (the module, imported where the run is built, registers
+        the env)
     :param seed: the seed of the model and the envs
     :param n_timesteps: the step budget (env steps, all envs together)
     :param eval_freq: env steps between two evaluations
@@ -264,10 +301,11 @@ class RunSpec:
     def run_dir(self, cache_dir: Path) -> Path:
         """
         :return: where the finished run is cached: ``<env>/<algo>/seed_<k>/<budget>-<key>``, the budget in env steps
-            or ``<N>ep`` for an episode budget
+            or ``<N>ep`` for an episode budget (``<env>`` without the module of a ``module:EnvId`` id, which the key
+            covers: no ``:`` in a folder's name)
         """
         budget = f"{self.max_episodes}ep" if self.max_episodes is not None else str(self.n_timesteps)
-        return cache_dir / self.env_id / self.algo / f"seed_{self.seed}" / f"{budget}-{self.key()}"
+        return cache_dir / split_env_id(self.env_id)[1] / self.algo / f"seed_{self.seed}" / f"{budget}-{self.key()}"
 
     @property
     def name(self) -> str:

@@ -28,7 +28,7 @@ from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import sync_envs_normalization
 
-from sb3_classic.harness.common import RunSpec, code_versions, population_class, register_algorithms
+from sb3_classic.harness.common import RunSpec, code_versions, env_spec, population_class, register_algorithms, split_env_id
 
 #: Files of a finished run (the run directory appears, complete, only when the run has finished)
 RUN_FILE = "run.json"
@@ -512,15 +512,18 @@ def _write_config(spec: RunSpec, folder: Path) -> Path:
     """:return: the zoo YAML of the run's exact entry (the source YAML may be edited meanwhile), written in ``folder``"""
     register_algorithms()
     config = folder / "hyperparams.yml"
-    config.write_text(yaml.safe_dump({spec.env_id: spec.hyperparams}, sort_keys=True))
+    config.write_text(yaml.safe_dump({split_env_id(spec.env_id)[1]: spec.hyperparams}, sort_keys=True))
     return config
 
 
 def _experiment_manager(spec: RunSpec, folder: Path, config: Path) -> ExperimentManager:
+    # A module:EnvId id: the module registers the env in this process (a worker's too), and the zoo gets the id of the
+    # registry (its ExperimentManager looks the env up with gymnasium.spec, which imports nothing)
+    env_spec(spec.env_id)
     return ExperimentManager(
         argparse.Namespace(),
         spec.algo,
-        spec.env_id,
+        split_env_id(spec.env_id)[1],
         str(folder / "zoo"),
         n_timesteps=spec.n_timesteps,
         # The harness adds its own evaluation below, timed apart from learning
@@ -554,6 +557,9 @@ def _prepare(spec: RunSpec, folder: Path, config: Path, queue: ProgressQueue | N
     assert setup is not None, "the ExperimentManager only returns None when optimizing hyperparameters"
     model, _ = setup
     n_envs = exp_manager.n_envs
+    # The zoo gives a YAML's env_kwargs to the training envs only (its evaluation envs take the command line's
+    # --eval-env-kwargs, none here): the run is evaluated on the env it trains on
+    exp_manager.eval_env_kwargs = exp_manager.env_kwargs
     # One env per evaluation episode (up to 16): the episodes of an evaluation run side by side
     eval_env = exp_manager.create_envs(min(spec.n_eval_episodes, 16), eval_env=True)
     evaluation = TimedEvalCallback(

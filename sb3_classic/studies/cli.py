@@ -19,7 +19,15 @@ from rich.markup import escape
 from sb3_classic.harness.common import positive_int
 from sb3_classic.harness.pool import report_missing, run_missing_runs
 from sb3_classic.harness.runner import RUN_FILE, DamagedRunError, RunError, check_run
-from sb3_classic.studies.outputs import PROGRAM, load_study_results, plural, study_command, write_studies_index, write_study
+from sb3_classic.studies.outputs import (
+    PROGRAM,
+    StudyResults,
+    load_study_results,
+    plural,
+    study_command,
+    write_studies_index,
+    write_study,
+)
 from sb3_classic.studies.spec import STATED, StudyError, StudyRun, StudySpec, load_study
 
 #: Where reduced runs (--seeds, --episodes, --steps) write their outputs, inside the cache: they are not the study's.
@@ -220,10 +228,7 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
     for study, results in zip(studies, loaded, strict=True):
         missing += [run.spec for run in results.missing]
         path = write_study(results, results_dir, study_command(study, budget, defaults.program, defaults.root), reduced)
-        for reading, judged in results.verdicts.items():
-            for result in judged:
-                where = "" if len(results.verdicts) == 1 else f" [{reading}]"
-                console.print(f"{study.name}{where}: {result.verdict}: {result.claim.text}", highlight=False, markup=False)
+        print_verdicts(results, console)
         console.print(f"wrote {path}", highlight=False)
     catalogue = list(studies)
     if defaults.catalogue is not None and not reduced and results_dir.resolve() == defaults.results_dir.resolve():
@@ -236,6 +241,17 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
     index = write_studies_index(catalogue, results_dir, "Studies", defaults.program, defaults.root, budget, reduced)
     console.print(f"wrote {index}", highlight=False)
     return report_missing(missing, console, ran=not args.report_only)
+
+
+def print_verdicts(results: StudyResults, console: Console) -> None:
+    """Say each claim's verdict under each reading, and where its variants did not learn (``stats.untrained_note``)."""
+    study = results.study
+    for reading, judged in results.verdicts.items():
+        for result in judged:
+            where = "" if len(results.verdicts) == 1 else f" [{reading}]"
+            console.print(f"{study.name}{where}: {result.verdict}: {result.claim.text}", highlight=False, markup=False)
+            if result.untrained:
+                console.print(f"  not learned: {result.untrained}", highlight=False, markup=False)
 
 
 def check_settings(studies: Sequence[StudySpec], pending: set[str], console: Console) -> list[str]:

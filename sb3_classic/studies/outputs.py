@@ -3,6 +3,7 @@ The outputs of a study, from its runs in the cache: per study a figure in the se
 its table (``<name>.md``, ``<name>.csv``) and its verdicts (``<name>.json``); and ``STUDIES.md``, one row per claim.
 """
 
+import dataclasses
 import json
 import math
 import shlex
@@ -22,7 +23,7 @@ import yaml
 
 from sb3_classic.harness.common import code_versions
 from sb3_classic.harness.runner import EPISODES_FILE, RUN_FILE, load_run, load_run_table
-from sb3_classic.studies import stats
+from sb3_classic.studies import stats, untrained
 from sb3_classic.studies.spec import STATED, StudyRun, StudySpec
 
 STUDIES_FILE = "STUDIES.md"
@@ -33,6 +34,8 @@ PROGRAM = "sb3_classic.studies"
 MAX_PANEL_COLUMNS = 4
 #: STUDIES.md names each other reading's verdict of a claim up to this many readings, and sums them up beyond
 MAX_LISTED_READINGS = 3
+#: Beside a verdict in STUDIES.md where the compared variants stayed at a random policy's return (``stats.untrained_note``)
+UNTRAINED_MARK = "not learned: no compared variant above a random policy's return"
 
 
 @dataclass
@@ -53,6 +56,8 @@ class StudyResults:
         core each; a run trained in lockstep, its share of its population's); studies and readings that share a run
         share its key
     :param lockstep_runs: the keys of the runs found that were trained in lockstep (``run.json``'s ``training``)
+    :param random_levels: per (reading, variant) found, a uniformly random policy's mean return on its env and its
+        interval over episodes (``untrained``; absent for an env without a time limit)
     """
 
     study: StudySpec
@@ -64,6 +69,7 @@ class StudyResults:
     missing: list[StudyRun] = field(default_factory=list)
     run_seconds: dict[str, float] = field(default_factory=dict)
     lockstep_runs: set[str] = field(default_factory=set)
+    random_levels: dict[tuple[str, str], stats.Interval] = field(default_factory=dict)
     n_runs: int = 0
 
     @property
@@ -104,15 +110,28 @@ def load_study_results(study: StudySpec, cache_dir: Path) -> StudyResults:
         results.returns[key] = stats.returns_matrix(returns)
         results.episode_counts[key] = [len(row) for row in returns]
         results.metrics[key] = stats.seed_metrics(returns, study.threshold, study.threshold_window)
+        results.random_levels.update(_random_level(study, key, cache_dir))
     for reading in study.readings:
         variants = {variant: results.metrics.get((reading, variant)) for variant in study.variants}
+        levels = {variant: level for (read, variant), level in results.random_levels.items() if read == reading}
         judged = []
         for claim in study.claims:
             needed = (claim.variant, *claim.others)
             if all(variants[variant] is not None for variant in needed):
-                judged.append(stats.judge(claim, {variant: variants[variant] for variant in needed}))  # type: ignore[misc]
+                metrics = {variant: variants[variant] for variant in needed}
+                result = stats.judge(claim, metrics)  # type: ignore[arg-type]
+                note = stats.untrained_note(claim, metrics, levels)  # type: ignore[arg-type]
+                judged.append(dataclasses.replace(result, untrained=note))
         results.verdicts[reading] = judged
     return results
+
+
+def _random_level(study: StudySpec, key: tuple[str, str], cache_dir: Path) -> dict[tuple[str, str], stats.Interval]:
+    """:return: for the (reading, variant) ``key``, a uniformly random policy's return on its env, if measurable"""
+    reading, variant = key
+    env_kwargs = study.zoo_entry(variant, reading).get("env_kwargs")
+    returns = untrained.cached_random_returns(cache_dir, study.env_id, env_kwargs)
+    return {} if returns is None else {key: stats.interval(returns)}
 
 
 def _trained_how(results: StudyResults) -> str:
@@ -262,6 +281,7 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
                     "verdict": result.verdict,
                     "measured": result.measured,
                     "favour": stats.favour(result),
+                    **({"untrained": result.untrained} if result.untrained else {}),
                 }
             )
     record = {
@@ -306,6 +326,7 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         f"reach it count as {censored_at}, a lower bound).",
         "- Intervals: 95% bootstrap over seeds (`scipy.stats.bootstrap`, BCa); verdicts by the rule of "
         "[STUDIES.md](STUDIES.md).",
+        *_random_level_notes(results),
         *_short_budget_notes(study),
         *_step_budget_notes(results),
         *_empty_run_notes(results),
@@ -329,7 +350,8 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
             if found is None:
                 lines.append(f"- **{NOT_RUN}**{suffix}: {claim.text} (the runs of a variant it compares are missing).")
             else:
-                lines.append(f"- **{found.verdict}**{partial}{suffix}: {claim.text}. Measured: {found.measured}.")
+                line = f"- **{found.verdict}**{partial}{suffix}: {claim.text}. Measured: {found.measured}."
+                lines.append(line + (f" **Not learned**: {found.untrained}." if found.untrained else ""))
     if len(results.verdicts) > 1:
         lines += ["", *_best_readings([claim.text for claim in study.claims], claims)]
     lines += [
@@ -359,7 +381,7 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
     return path
 
 
-RULE = """Verdicts are decided by 95% bootstrap confidence intervals over seeds (`scipy.stats.bootstrap`, BCa, 10,000
+RULE = f"""Verdicts are decided by 95% bootstrap confidence intervals over seeds (`scipy.stats.bootstrap`, BCa, 10,000
 resamples; each variant's seeds resampled independently):
 
 - **better** (A beats B on a metric): the interval of A − B, oriented so that positive means A is better (lower is
@@ -371,6 +393,10 @@ resamples; each variant's seeds resampled independently):
 - **reaches** / **below** a level, on the metric's own scale: the interval of A's metric lies at or above the level
   (*supported* / *not supported*), below it (the opposite), or across it (too close to call).
 - A claim with fewer than 5 seeds in one of its variants is too close to call, whatever its intervals.
+- Beside the verdict, *not learned* where no compared variant's mean return over its last 100 episodes has an
+  interval above that of a uniformly random policy's return on its env ({untrained.EPISODES} episodes, or those that
+  end within {untrained.MAX_STEPS:,} env steps; measured and cached with the runs): whatever the verdict, it compares
+  runs that did not measurably learn.
 - Episodes to threshold is censored: a seed that never reaches the threshold counts as the budget, a lower bound of
   its value. Comparisons between variants are of the means within the budget (restricted means); a verdict that
   censoring could overturn is too close to call: a mean shown below a level, two variants shown alike, a comparison
@@ -474,6 +500,18 @@ def write_studies_index(
     results_dir.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines))
     return path
+
+
+def _random_level_notes(results: StudyResults) -> list[str]:
+    """:return: the level of a policy that learned nothing, which the claims are checked against"""
+    levels = sorted({level.format() for level in results.random_levels.values()})
+    if not levels:
+        return []
+    return [
+        f"- A uniformly random policy's return on the env: {' or '.join(levels)} (the mean of {untrained.EPISODES} "
+        f"episodes, or of those that end within {untrained.MAX_STEPS:,} env steps, and its 95% interval; with each "
+        "variant's `env_kwargs`). A claim none of whose variants rose above it is marked **Not learned**."
+    ]
 
 
 def _empty_run_notes(results: StudyResults) -> list[str]:
@@ -586,6 +624,8 @@ def _claim_rows(
             measured = measured.rstrip(".") + f". Other readings: {listed}."
         if not record.get("complete", True):
             verdict += f" (partial: {record['missing_runs']} runs missing)"
+        if stated[0].get("untrained"):
+            verdict += f" ({UNTRAINED_MARK})"
         if record.get("reduced"):
             verdict += " (reduced run)"
         rows.append((f"[{source or name}]({name}.md)", text, measured, verdict, f"`{command}`"))

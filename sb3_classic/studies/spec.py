@@ -3,12 +3,12 @@ A study file: one env and algorithm, base hyperparameters in the zoo's YAML form
 budget, and the claims under test. ``load_study`` reads and checks one; ``StudySpec.runs`` turns it into the
 harness's runs, one per (variant, reading, seed).
 
-The format (the README of the repository's ``benchmarks/studies/`` has the long form)::
+The format (the documentation's page "Study files" has every field)::
 
     study: fig15-sarsa-cartpole-n           # a name (default: the file's stem)
     title: Values of n, n-step SARSA on CartPole-v1
     source: seed report Fig 15, §4.4.5      # where the claim comes from (optional)
-    env: CartPole-v1
+    env: CartPole-v1                        # or module:EnvId, an env your module registers (mychain:Chain-v0)
     algo: nstep_sarsa                       # a key of rl_zoo3.ALGOS
     seeds: 10                               # seeds 0–9, or a list
     budget: {episodes: 500}                 # or {steps: 100000}; {episodes: N, max_steps: M} caps the steps
@@ -40,14 +40,32 @@ from typing import Any, TypeGuard
 import gymnasium
 import rl_zoo3
 import yaml
+from rl_zoo3.exp_manager import ExperimentManager
+from rl_zoo3.utils import get_wrapper_class
 
-from sb3_classic.harness.common import THRESHOLDS, RunSpec, algorithm_defaults, register_algorithms, unknown_setting
+from sb3_classic.harness.common import (
+    THRESHOLDS,
+    RunSpec,
+    algorithm_defaults,
+    env_spec,
+    register_algorithms,
+    split_env_id,
+    unknown_setting,
+)
 from sb3_classic.harness.lockstep import plan_lockstep
 from sb3_classic.zoo import YAML_NAMES
 
 METRICS = ("mean_return", "last_100_return", "episodes_to_threshold")
 CLAIM_KINDS = ("better", "similar", "reaches", "below")
 STATISTICS = ("mean", "std")
+#: Hyperparameters whose mapping a variant or a reading overrides key by key
+MERGED_KEYS = ("policy_kwargs", "env_kwargs")
+#: How to name an env of one's own in a study file
+OWN_ENV = (
+    "for an env of your own, register it in a module, gymnasium.register(id='Chain-v0', entry_point='mychain:Chain'), "
+    "and name it with that module, env: mychain:Chain-v0 (the module is imported, which registers the env; it must be "
+    "importable: in the working directory, on PYTHONPATH, or installed)"
+)
 #: The reading of a study's settings as its file states them (``readings`` adds others)
 STATED = "as stated"
 #: Episodes per final deterministic evaluation of a study's run (its only evaluation)
@@ -141,7 +159,7 @@ class StudySpec:
     :param name: its name (file names of its results)
     :param title: a title for its figure and table
     :param source: where its claims come from
-    :param env_id: the Gymnasium env
+    :param env_id: the Gymnasium env id, or ``module:EnvId`` (Gymnasium's form: the module registers the env)
     :param algo: the algorithm (a key of ``rl_zoo3.ALGOS``)
     :param seeds: the seeds of every variant
     :param budget: per run
@@ -187,11 +205,13 @@ class StudySpec:
         if isinstance(entry.get("policy_kwargs"), Mapping):
             entry["policy_kwargs"] = policy_kwargs_string(entry["policy_kwargs"])
         # The zoo requires it; the run's budget (and, with an episode budget, the callback that stops it) decides
-        return {"n_timesteps": self.step_cap(int(entry.get("n_envs", 1))), **entry}
+        return {"n_timesteps": self.step_cap(int(entry.get("n_envs", 1)), entry.get("env_kwargs")), **entry}
 
-    def step_cap(self, n_envs: int = 1) -> int:
+    def step_cap(self, n_envs: int = 1, env_kwargs: Mapping[str, Any] | None = None) -> int:
         """
         :param n_envs: the run's envs
+        :param env_kwargs: the run's ``env_kwargs`` (a ``max_episode_steps`` there is the env's time limit, as in
+            ``gymnasium.make``)
         :return: the env steps of a run: the budget in steps, or the cap of an episode budget
         """
         if self.budget.steps is not None:
@@ -199,7 +219,7 @@ class StudySpec:
         assert self.budget.episodes is not None
         if self.budget.max_steps is not None:
             return self.budget.max_steps
-        limit = gymnasium.spec(self.env_id).max_episode_steps
+        limit = time_limit(env_spec(self.env_id), env_kwargs)
         assert limit is not None, "checked by load_study"
         # Every episode at the time limit, and the unfinished episodes of the other envs
         return (self.budget.episodes + n_envs) * limit
@@ -254,6 +274,13 @@ class StudySpec:
         return dataclasses.replace(self, seeds=tuple(range(seeds)) if seeds is not None else self.seeds, budget=budget)
 
 
+def time_limit(spec: gymnasium.envs.registration.EnvSpec, env_kwargs: Mapping[str, Any] | None) -> int | None:
+    """:return: the env's time limit: ``max_episode_steps`` of ``env_kwargs`` (as ``gymnasium.make`` reads it), else
+    its registration's (None: none)"""
+    limit = (env_kwargs or {}).get("max_episode_steps")
+    return limit if _is_int(limit) and limit > 0 else spec.max_episode_steps
+
+
 def read_entry(hyperparams: Mapping[str, Any], variant: Mapping[str, Any], reading: Mapping[str, Any]) -> dict[str, Any]:
     """
     :return: the base ``hyperparams`` with a variant's overrides, then a reading's, for the settings the variant has
@@ -266,11 +293,12 @@ def read_entry(hyperparams: Mapping[str, Any], variant: Mapping[str, Any], readi
 
 def merge(base: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
     """
-    :return: ``base`` with ``overrides``; a ``policy_kwargs`` mapping is merged key by key (a string replaces)
+    :return: ``base`` with ``overrides``; a ``policy_kwargs`` or ``env_kwargs`` mapping is merged key by key (a string
+        replaces)
     """
     merged = dict(base)
     for key, value in overrides.items():
-        if key == "policy_kwargs" and isinstance(value, Mapping) and isinstance(merged.get(key), Mapping):
+        if key in MERGED_KEYS and isinstance(value, Mapping) and isinstance(merged.get(key), Mapping):
             merged[key] = {**merged[key], **value}
         else:
             merged[key] = value
@@ -349,27 +377,68 @@ class _Checker:
                 self.fail(f"{where}.seed", "each run's seed comes from the study's `seeds:` (a count or a list): remove it")
             elif (unknown := unknown_setting(algo, str(key))) is not None:
                 self.fail(f"{where}.{key}", unknown)
-            self.float_strings(f"{where}.{key}", value)
+            if not self.float_strings(f"{where}.{key}", value):
+                self.as_the_zoo_reads(f"{where}.{key}", str(key), value)
             if key == "policy_kwargs" and not isinstance(value, str | Mapping):
                 self.fail(
                     f"{where}.policy_kwargs", "write a mapping (net_arch: [64, 64], ...) or the zoo's string 'dict(...)'"
                 )
+            if key == "env_kwargs" and (not isinstance(value, Mapping) or not all(isinstance(name, str) for name in value)):
+                self.fail(
+                    f"{where}.env_kwargs",
+                    f"{value!r}: a mapping of the env's keyword arguments, e.g. env_kwargs: {{length: 10}} (passed to "
+                    "gymnasium.make with the env's id)",
+                )
         return dict(entry)
 
-    def float_strings(self, where: str, value: Any) -> None:
+    def as_the_zoo_reads(self, where: str, key: str, value: Any) -> None:
+        """
+        Read a hyperparameter as the run will: rl-zoo3's own preprocessing (``ExperimentManager._preprocess_schedules``
+        for the step sizes and clip ranges, ``rl_zoo3.utils.get_wrapper_class`` for the wrappers), so that what it
+        cannot read fails here, naming the field, and not when the run starts.
+        """
+        wrapper = key in ("env_wrapper", "vec_env_wrapper")
+        try:
+            if wrapper:
+                read = get_wrapper_class({key: value}, key)
+            else:
+                read = ExperimentManager._preprocess_schedules({key: value})[key]
+        except Exception as error:
+            if wrapper:
+                takes = (
+                    "the full name of an importable wrapper class, module.Class (e.g. gymnasium.wrappers.FlattenObservation), "
+                    "or a list of them, each a name or {name: {keyword: value}}"
+                )
+            else:
+                takes = (
+                    f"a number ({key}: !!float 1e-3), or the zoo's linear schedule from a value down to 0, "
+                    f"'lin_<value>' ({key}: lin_1e-3)"
+                )
+            self.fail(where, f"{value!r}: rl-zoo3 cannot read it ({type(error).__name__}: {error}): {key} takes {takes}")
+            return
+        # A string the zoo turned into a schedule (not one it passes on as it is), named otherwise than lin_
+        if not wrapper and isinstance(value, str) and read is not value and not value.startswith("lin_"):
+            self.fail(
+                where,
+                f"{value!r}: rl-zoo3 reads every 'NAME_<value>' as its linear schedule, whatever NAME "
+                f"({value.split('_')[0]!r} here): write lin_{value.split('_', 1)[1]}",
+            )
+
+    def float_strings(self, where: str, value: Any) -> bool:
+        """:return: whether a number written as a string was found (and said)"""
         # YAML reads 1e-3 (no dot) as a string, and the zoo would pass it on as one
         if isinstance(value, str):
             try:
                 float(value)
             except ValueError:
-                return
+                return False
             self.fail(where, f"{value!r} is read as a string by YAML: write !!float {value}, or {float(value)!r}")
-        elif isinstance(value, Mapping):
-            for key, item in value.items():
-                self.float_strings(f"{where}.{key}", item)
-        elif isinstance(value, list):
-            for index, item in enumerate(value):
-                self.float_strings(f"{where}[{index}]", item)
+            return True
+        if isinstance(value, Mapping):
+            return any([self.float_strings(f"{where}.{key}", item) for key, item in value.items()])
+        if isinstance(value, list):
+            return any([self.float_strings(f"{where}[{index}]", item) for index, item in enumerate(value)])
+        return False
 
 
 def load_study(path: Path | str) -> StudySpec:
@@ -399,14 +468,20 @@ def load_study(path: Path | str) -> StudySpec:
             check.fail(key, "missing (a study needs env, algo, budget, hyperparams, variants or vary, and a claim)")
     check.raise_if_any()
 
-    env_id, env_spec, algo = _env_and_algo(check, data)
+    env_id, registration, algo = _env_and_algo(check, data)
 
     seeds = _seeds(check, data.get("seeds", 10))
     budget = _budget(check, data["budget"])
-    uncapped = budget is not None and budget.episodes is not None and budget.max_steps is None
-    if uncapped and env_spec is not None and env_spec.max_episode_steps is None:
-        check.fail("budget.max_steps", f"{env_id} has no time limit: give a step cap, e.g. max_steps: 500000")
     hyperparams = check.hyperparams("hyperparams", data["hyperparams"], algo)
+    uncapped = budget is not None and budget.episodes is not None and budget.max_steps is None
+    env_kwargs = hyperparams.get("env_kwargs")
+    limit = time_limit(registration, env_kwargs if isinstance(env_kwargs, Mapping) else None) if registration else None
+    if uncapped and registration is not None and limit is None:
+        check.fail(
+            "budget.max_steps",
+            f"{env_id} has no time limit: give a step cap, e.g. max_steps: 500000 (or a time limit, env_kwargs: "
+            "{max_episode_steps: 500} in hyperparams)",
+        )
     variants = _variants(check, data, algo)
     readings = _readings(check, data.get("readings") or {}, algo)
     for name, overrides in variants.items():
@@ -417,7 +492,7 @@ def load_study(path: Path | str) -> StudySpec:
     _check_readings(check, hyperparams, variants, readings)
 
     # The study's own, else the harness's (CartPole-v1, Acrobot-v1), else Gymnasium's reward_threshold of the env
-    default_threshold = THRESHOLDS.get(env_id, env_spec.reward_threshold if env_spec is not None else None)
+    default_threshold = THRESHOLDS.get(env_id, registration.reward_threshold if registration is not None else None)
     threshold = data.get("threshold", default_threshold)
     if not _is_number(threshold):
         check.fail(
@@ -435,7 +510,7 @@ def load_study(path: Path | str) -> StudySpec:
                     "episode count to censor at): write budget: {episodes: ...}, or claim on a return metric",
                 )
     settings = [hyperparams, *variants.values(), *readings.values()]
-    _check_return_levels(check, data, env_id, env_spec, settings, float(threshold), claims)
+    _check_return_levels(check, data, env_id, registration, settings, float(threshold), claims)
     window = check.positive_int("threshold_window", data.get("threshold_window", 100))
     smooth = check.positive_int("smooth", data.get("smooth", 10))
     name = data.get("study", path.stem)
@@ -495,22 +570,44 @@ def _check_distinct_variants(check: _Checker, study: StudySpec) -> None:
 
 
 def _env_and_algo(check: _Checker, data: Mapping[str, Any]) -> tuple[str, Any, str]:
-    """:return: the env id, its Gymnasium spec (None if unknown) and the algorithm; raises if the algorithm is unknown"""
+    """
+    :return: the env id, its Gymnasium spec (None if unknown) and the algorithm; raises if the algorithm is unknown.
+        The module of a ``module:EnvId`` id is imported here (it registers the env), as ``gymnasium.make`` imports it
+    """
     env_id = data["env"]
-    env_spec = None
-    if not isinstance(env_id, str):
-        check.fail("env", f"{env_id!r}: the id of a registered Gymnasium env, e.g. env: CartPole-v1")
+    found = None
+    if not isinstance(env_id, str) or env_id.count(":") > 1 or env_id.startswith(":") or env_id.endswith(":"):
+        check.fail(
+            "env",
+            f"{env_id!r}: the id of a registered Gymnasium env, e.g. env: CartPole-v1, or module:EnvId for an env that "
+            "the module registers, e.g. env: mychain:Chain-v0",
+        )
     else:
+        module, gym_id = split_env_id(env_id)
         try:
-            env_spec = gymnasium.spec(env_id)
+            found = env_spec(env_id)
         except gymnasium.error.Error as error:
-            check.fail("env", f"{env_id!r} is not a registered Gymnasium env ({error})")
+            if module is None:
+                check.fail("env", f"{env_id!r} is not a registered Gymnasium env ({error}): {OWN_ENV}")
+            else:
+                check.fail(
+                    "env",
+                    f"{env_id!r}: importing {module!r} registers no env {gym_id!r} ({error}): the module must call "
+                    f"gymnasium.register(id={gym_id!r}, entry_point=...) when it is imported",
+                )
+        except Exception as error:
+            check.fail(
+                "env",
+                f"{env_id!r}: its module {module!r} cannot be imported ({type(error).__name__}: {error}): put {module}.py "
+                "in the working directory or a folder on PYTHONPATH, or install its package (the study's runs import it "
+                "in every process that builds the env)",
+            )
     register_algorithms()
     algo = data["algo"]
     if not isinstance(algo, str) or algo not in rl_zoo3.ALGOS:
         check.fail("algo", f"{algo!r} is not an algorithm of rl-zoo3: choose one of {', '.join(sorted(rl_zoo3.ALGOS))}")
         check.raise_if_any()
-    return env_id, env_spec, algo
+    return env_id, found, algo
 
 
 def _is_int(value: Any) -> TypeGuard[int]:

@@ -253,6 +253,38 @@ class ClaimResult:
     verdict: str
     comparisons: tuple[Comparison, ...]
     measured: str
+    #: Said beside the verdict where no compared variant rose above a random policy's return (``untrained_note``)
+    untrained: str = ""
+
+
+def untrained_note(claim: Claim, metrics: Mapping[str, Mapping[str, np.ndarray]], levels: Mapping[str, Interval]) -> str:
+    """
+    Whether a claim compares runs that did not measurably learn: none of its variants has a mean return over its last
+    ``LAST_EPISODES`` episodes whose interval over seeds lies above the interval of a uniformly random policy's return
+    on its env (``untrained.random_returns``; with fewer than two seeds, or a single random episode, the estimates). A
+    variant below that level has not learned either (it settled on a policy worse than chance).
+
+    :param claim: the claim
+    :param metrics: per variant, its ``seed_metrics``
+    :param levels: per variant, the random policy's mean return on its env and its interval over episodes (a
+        variant without one: the note is not given)
+    :return: the note to give beside the verdict, or '' if some variant rose above the level (or a level is unknown)
+    """
+    variants = (claim.variant, *claim.others)
+    if any(variant not in levels for variant in variants):
+        return ""
+    for variant in variants:
+        ours, level = interval(metrics[variant]["last_100_return"]), levels[variant]
+        low = ours.low if np.isfinite(ours.low) else ours.estimate
+        high = level.high if np.isfinite(level.high) else level.estimate
+        if low > high:
+            return ""
+    shown = " or ".join(sorted({levels[variant].format() for variant in variants}))
+    if len(variants) == 1:
+        what = f"{claim.variant}'s mean return over its last {LAST_EPISODES} episodes is not"
+    else:
+        what = f"none of the {len(variants)} compared variants has a mean return over its last {LAST_EPISODES} episodes"
+    return f"{what} above a uniformly random policy's ({shown}): the verdict compares runs that did not measurably learn"
 
 
 def higher_is_better(claim: Claim) -> bool:
