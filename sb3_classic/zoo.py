@@ -31,7 +31,6 @@ import contextlib
 import functools
 import importlib
 import inspect
-import os
 import weakref
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -47,6 +46,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from torch import nn
 
 from sb3_classic.common.masking import get_action_masks, is_masking_supported
+from sb3_classic.common.threads import threads_chosen
 from sb3_classic.common.tile_coding import TileCoding
 from sb3_classic.common.torch_layers import WEIGHT_INITS
 from sb3_classic.reinforce import REINFORCE
@@ -321,33 +321,19 @@ def _zoo_targets() -> tuple[dict[str, Any], dict[str, Any], dict[str, Any], type
     return algos, samplers, converters, manager, [exp_manager, utils, rl_zoo3]
 
 
-#: PyTorch's number of intra-op threads when this module was imported: another one later was the user's choice
-_STARTING_THREADS = th.get_num_threads()
-
-
 def one_thread_unless_chosen(num_threads: int | None, device: th.device | str, verbose: int = 1) -> bool:
     """
-    One PyTorch thread for a zoo run on the CPU, unless the user chose a number. The networks of these algorithms
-    are small (two layers of 64 to 256 units, a batch of one to a few hundred rows) and they take a gradient step
-    every few env steps: PyTorch's intra-op threads cost more to wake than they save, and on a machine with other
-    work running each of those steps waits for a busy core. ``benchmarks/results/threads.md`` has the measurement.
-
-    A number is chosen by ``--num-threads N``, ``OMP_NUM_THREADS`` or ``MKL_NUM_THREADS``, or by a call of
-    ``torch.set_num_threads`` before the run; an ``ExperimentManager`` built in Python without the zoo's command-line
-    arguments (no ``num_threads`` in them) leaves the threads alone.
+    One PyTorch thread for the whole process of a zoo run on the CPU, unless the user chose a number (why:
+    ``sb3_classic.common.threads``). A number is chosen by ``--num-threads N``, or as ``threads_chosen`` says (the
+    environment's ``OMP_NUM_THREADS``, a call of ``torch.set_num_threads``); an ``ExperimentManager`` built in Python
+    without the zoo's command-line arguments (no ``num_threads`` in them) leaves the threads alone.
 
     :param num_threads: the zoo's ``--num-threads`` (``-1``, its default: not chosen), or None outside its command line
     :param device: the zoo's ``--device``
     :param verbose: print what was set (0: nothing)
     :return: whether it set one thread
     """
-    chosen = (
-        num_threads is None
-        or num_threads > 0
-        or "OMP_NUM_THREADS" in os.environ
-        or "MKL_NUM_THREADS" in os.environ
-        or th.get_num_threads() != _STARTING_THREADS
-    )
+    chosen = num_threads is None or num_threads > 0 or threads_chosen()
     if chosen or get_device(device).type != "cpu":
         return False
     th.set_num_threads(1)

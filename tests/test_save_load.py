@@ -158,6 +158,25 @@ def test_learn_without_an_env_says_how_to_give_one(model_class: type[BaseAlgorit
     loaded.learn(100)
 
 
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+def test_an_env_of_other_spaces_is_named_with_the_env_the_model_trained_on(
+    model_class: type[BaseAlgorithm], tmp_path: Path
+) -> None:
+    # SB3 printed the two spaces, and neither the env the model trained on nor what to pass
+    model = make_model(model_class, seed=0)
+    model.save(tmp_path / "model")
+    expected = rf"this {model_class.__name__} model was trained on CartPole-v1, and Acrobot-v1 does not fit it .*Pass env="
+    with pytest.raises(ValueError, match=expected):
+        model_class.load(tmp_path / "model", env=make_vec_env("Acrobot-v1"))
+    with pytest.raises(ValueError, match=expected):
+        model.set_env(make_vec_env("Acrobot-v1"))
+    # A model loaded without an env and saved again still knows it
+    model_class.load(tmp_path / "model").save(tmp_path / "again")
+    with pytest.raises(ValueError, match=expected):
+        model_class.load(tmp_path / "again", env=make_vec_env("Acrobot-v1"))
+    assert model_class.load(tmp_path / "again", env=make_vec_env("CartPole-v1")).get_env() is not None
+
+
 class StopAt(BaseCallback):
     """Stops ``learn()`` after ``steps`` env steps (a callback returning False, as a user's early stop does)."""
 

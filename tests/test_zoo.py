@@ -512,11 +512,11 @@ def test_zoo_trains_with_one_thread_unless_a_number_is_chosen(tmp_path: Path) ->
 
 
 def test_one_thread_unless_chosen(monkeypatch: pytest.MonkeyPatch) -> None:
-    import sb3_classic.zoo as zoo_module
+    import sb3_classic.common.threads as threads_module
 
     monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
     monkeypatch.delenv("MKL_NUM_THREADS", raising=False)
-    monkeypatch.setattr(zoo_module, "_STARTING_THREADS", 2)  # (PyTorch's count when the module was imported)
+    monkeypatch.setattr(threads_module, "_STARTING_THREADS", 2)  # (PyTorch's count when the package was imported)
     before = th.get_num_threads()
     try:
         th.set_num_threads(2)
@@ -827,3 +827,12 @@ def test_train_with_a_stored_trial(tmp_path: Path, algo: str) -> None:
             assert model.exploration_fraction == params["exploration_fraction"]
         else:
             assert model.exploration_decay_rate == params["exploration_decay_rate"]
+
+
+def test_a_misspelt_argument_in_params_names_the_argument_meant(tmp_path: Path) -> None:
+    # Python's bare "unexpected keyword argument 'n_step'" named no fix
+    arguments = ("--algo", "nstep_sarsa", "--env", "CartPole-v1", "-n", "64", "-params", "n_step:5")
+    result = zoo(tmp_path, "train", *arguments, check=False)
+    assert result.returncode != 0
+    last_line = result.stderr.splitlines()[-1]
+    assert "unexpected keyword argument 'n_step': did you mean 'n_steps'?" in last_line, result.stderr[-2000:]

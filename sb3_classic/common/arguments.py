@@ -4,6 +4,7 @@ The rules of the arguments the algorithms share, as a table, and the errors of t
 """
 
 import contextvars
+import difflib
 import inspect
 import numbers
 from collections.abc import Callable, Mapping, Sequence
@@ -150,6 +151,30 @@ def constructor_parameters(cls: type) -> dict[str, inspect.Parameter]:
     return parameters
 
 
+def check_keywords(cls: type, kwargs: Mapping[str, Any]) -> None:
+    """
+    :param cls: a class about to be constructed
+    :param kwargs: the keyword arguments of the call
+    :raises TypeError: for a keyword its constructor does not take (Python's own error names no fix), naming the
+        closest argument it does take. A constructor that passes ``**kwargs`` on to ``object`` takes any keyword, and
+        nothing is checked
+    """
+    inits = [klass.__dict__["__init__"] for klass in cls.__mro__ if "__init__" in klass.__dict__]
+    takes_any = all(
+        any(parameter.kind is parameter.VAR_KEYWORD for parameter in inspect.signature(init).parameters.values())
+        for init in inits
+    )
+    if takes_any:
+        return
+    arguments = [name for name in constructor_parameters(cls) if name != "self"]
+    for key in kwargs:
+        if key not in arguments:
+            public = [name for name in arguments if not name.startswith("_")]
+            close = difflib.get_close_matches(key, public, n=1)
+            hint = f"did you mean {close[0]!r}?" if close else f"{cls.__name__} takes {', '.join(public)}"
+            raise TypeError(f"{cls.__name__}() got an unexpected keyword argument {key!r}: {hint}")
+
+
 #: The policy's arguments the algorithm passes itself (not ``policy_kwargs``)
 _POLICY_ARGUMENTS = {
     "self",
@@ -180,16 +205,23 @@ def refuse_policy_kwargs_set_here(algorithm: str, policy_kwargs: Mapping[str, An
             )
 
 
+class PolicyClassError(TypeError, ValueError):
+    """
+    A policy class the algorithm cannot train: a ``TypeError``, and a ``ValueError`` as sb3-contrib's ``MaskablePPO``
+    raises for a policy of another class, so that a script written for either catches it.
+    """
+
+
 def check_policy_class(algorithm: str, policy_class: Any, policy_aliases: Mapping[str, type]) -> None:
     """
     :param algorithm: the algorithm's class name
     :param policy_class: the policy class to build
     :param policy_aliases: the algorithm's policies by name
-    :raises TypeError: if it is not one of them or a subclass of one (``foreign_policy_message``)
+    :raises PolicyClassError: if it is not one of them or a subclass of one (``foreign_policy_message``)
     """
     own_policies = tuple(policy_aliases.values())
     if own_policies and not (isinstance(policy_class, type) and issubclass(policy_class, own_policies)):
-        raise TypeError(foreign_policy_message(algorithm, policy_class, policy_aliases))
+        raise PolicyClassError(foreign_policy_message(algorithm, policy_class, policy_aliases))
 
 
 def foreign_policy_message(algorithm: str, policy_class: Any, policy_aliases: Mapping[str, type]) -> str:

@@ -19,6 +19,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from sb3_classic.common.arguments import (
     BASE_ARGUMENT_RULES,
     check_arguments,
+    check_keywords,
     check_policy_class,
     check_policy_kwargs,
     refuse_policy_kwargs_set_here,
@@ -38,7 +39,7 @@ from sb3_classic.common.masking import (
     mask_segments,
 )
 from sb3_classic.common.policies import action_offset
-from sb3_classic.common.save_util import SafeSaveLoadMixin, episodes_not_continued
+from sb3_classic.common.save_util import SafeSaveLoadMixin, env_id, episodes_not_continued, other_env_message
 from sb3_classic.common.schedules import StepDecay
 from sb3_classic.common.utils import check_bool, check_positive_int
 
@@ -101,6 +102,11 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
     lr_decay: StepDecay
     #: ``"batch"`` or ``"per_step"``: how an update applies its transitions (set by each algorithm)
     update_mode: str
+
+    def __new__(cls, *args: Any, **kwargs: Any) -> Any:
+        # A misspelt argument (n_step=5) gets the closest one (n_steps), in Python and through rl-zoo3's -params
+        check_keywords(cls, kwargs)
+        return super().__new__(cls)
 
     def __init__(
         self,
@@ -613,7 +619,11 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
         """
         env = self._wrap_env(env, self.verbose)
         # Before anything changes: a model whose env was refused keeps its envs and buffer
-        check_for_correct_spaces(env, self.observation_space, self.action_space)
+        try:
+            check_for_correct_spaces(env, self.observation_space, self.action_space)
+        except ValueError as error:
+            trained_on = env_id(self.env) or getattr(self, "_trained_env_id", None)
+            raise ValueError(other_env_message(type(self).__name__, trained_on, env, error)) from error
         if env.num_envs != self.n_envs:
             if not force_reset:
                 raise ValueError(

@@ -17,6 +17,7 @@ from torch import nn
 
 from sb3_classic.common.masking import is_masking_supported
 from sb3_classic.common.stacked import StackedAdam, StackedMLP
+from sb3_classic.common.threads import one_thread_unless_chosen
 
 #: The remaining progress at which two schedules are compared (``same_setting``)
 SCHEDULE_PROBES = (1.0, 0.75, 0.5, 0.25, 0.0)
@@ -153,7 +154,9 @@ def start_learn(
 def trained_together(population: str, models: Sequence[Any], rngs: Sequence[np.random.Generator]) -> Iterator[None]:
     """
     While a population trains its members: each draws its behaviour policy's actions from its own generator, reads no
-    action masks (the population's check refused envs with them), and refuses ``save`` (``refusing_save``); as before
+    action masks (the population's check refused envs with them), and refuses ``save`` (``refusing_save``); PyTorch
+    uses one thread on the CPU unless the user chose a number (``one_thread_unless_chosen``: the stacked networks are
+    small too, and threads made a population slower than its members one after another on a busy machine); as before
     when the context ends, however it ends.
 
     :param population: the population's class name, for the messages
@@ -167,7 +170,8 @@ def trained_together(population: str, models: Sequence[Any], rngs: Sequence[np.r
         # now would hold a stale Adam state, so saving waits until learn returns
         model.__dict__["save"] = refusing_save(population)
     try:
-        yield
+        with one_thread_unless_chosen(models[0].device):
+            yield
     finally:
         for model in models:
             model._action_rng = None

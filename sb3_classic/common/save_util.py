@@ -20,6 +20,7 @@ import torch as th
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.save_util import load_from_zip_file, recursive_getattr
 from stable_baselines3.common.type_aliases import GymEnv, TensorDict
+from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_classic.common.arguments import LOADING, constructor_parameters
 
@@ -83,6 +84,13 @@ class SafeSaveLoadMixin(BaseAlgorithm):
         token = LOADING.set(True)
         try:
             return super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
+        except ValueError as error:
+            if not str(error).startswith(SPACES_DIFFER):
+                raise
+            if isinstance(path, io.BufferedIOBase):
+                path.seek(0)
+            data, _, _ = load_from_zip_file(path, load_data=True, device="cpu", custom_objects=custom_objects)
+            raise ValueError(other_env_message(cls.__name__, (data or {}).get("_trained_env_id"), env, error)) from error
         except RuntimeError as error:
             # PyTorch's load_state_dict raises RuntimeError for weights of other networks; the arguments are checked
             # before the weights are loaded, so a RuntimeError with a network argument changed is of those weights
@@ -131,6 +139,8 @@ class SafeSaveLoadMixin(BaseAlgorithm):
         :param include: names of the attributes to save although excluded by default
         :raises PermissionError: if the target exists and is not writable
         """
+        # The id of the env it trained on, for load()'s and set_env()'s error on an env of other spaces (SB3 saves none)
+        self._trained_env_id = env_id(self.env) or getattr(self, "_trained_env_id", None)
         target = pathlib.Path(path) if isinstance(path, (str, os.PathLike)) else None
         if target is None or not target.name or target.is_dir():
             super().save(path, exclude, include)  # (a file object; SB3's own handling of "" and of a folder)
@@ -229,3 +239,38 @@ def episodes_not_continued(model: BaseAlgorithm, episode_length: np.ndarray) -> 
     else:
         return None
     return f"{reason}; the learned parameters and counts are kept)"
+
+
+#: The start of SB3's error for an env whose spaces differ from a model's (``check_for_correct_spaces``)
+SPACES_DIFFER = ("Observation spaces do not match", "Action spaces do not match")
+
+
+def env_id(env: GymEnv | str | None) -> str | None:
+    """
+    :param env: an env, a VecEnv (its first env's), or an env id
+    :return: its Gymnasium id, if it has one (None for an env without a spec or none at all)
+    """
+    if env is None or isinstance(env, str):
+        return env
+    try:
+        spec = env.get_attr("spec", [0])[0] if isinstance(env, VecEnv) else env.spec
+    except Exception:  # (a description only: a VecEnv of the user's may not answer get_attr)
+        return None
+    return getattr(spec, "id", None)
+
+
+def other_env_message(algorithm: str, trained_on: str | None, env: GymEnv | str | None, error: ValueError) -> str:
+    """
+    :param algorithm: the model's class name
+    :param trained_on: the id of the env the model trained on, if known
+    :param env: the env given, whose spaces differ from the model's
+    :param error: SB3's error, which gives the two spaces
+    :return: which env the model trained on, which env was given, and what to pass instead
+    """
+    given = env_id(env) or "the env given"
+    model = f"trained on {trained_on}" if trained_on else "trained on another env"
+    fit = f"{trained_on} or another env with its spaces" if trained_on else "an env with the model's spaces"
+    return (
+        f"this {algorithm} model was {model}, and {given} does not fit it ({error}). Pass env= {fit}; env=None loads it "
+        f"to predict only; or train a new {algorithm} on {given}"
+    )

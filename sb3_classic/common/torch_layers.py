@@ -55,6 +55,13 @@ def check_net_arch(net_arch: Any, keys: Sequence[str] = ()) -> None:
         for key, sizes in net_arch.items():
             _check_layer_sizes(f"net_arch[{key!r}]", sizes, example)
         return
+    separate = [part for part in net_arch if isinstance(part, dict)] if isinstance(net_arch, list) else []
+    if separate:
+        # SB3's form before 1.8, [shared sizes..., dict(pi=..., vf=...)], which A2C/PPO still accept with a warning
+        fix = f"net_arch={separate[0]!r} (SB3's form since 1.8; no shared layers)"
+        if not keys:
+            fix = f"a list of hidden layer sizes, {example}"
+        raise ValueError(f"net_arch={net_arch!r}: a dict inside the list is SB3's older form; write {fix}")
     _check_layer_sizes("net_arch", net_arch, example)
 
 
