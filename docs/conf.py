@@ -21,6 +21,8 @@ extensions = [
     "sphinx.ext.autodoc",
     "sphinx.ext.extlinks",
     "sphinx.ext.mathjax",
+    # MathJax from the docs extra's own copy, not a CDN: the maths renders offline
+    "sphinx-mathjax-offline",
 ]
 
 source_suffix = {".md": "markdown"}

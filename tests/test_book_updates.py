@@ -317,20 +317,26 @@ LINEAR_IDS = ["n=4", "n=1 expected, bias", "n=3 train_freq=4"]
 
 
 @pytest.mark.parametrize("kwargs", LINEAR_SETTINGS, ids=LINEAR_IDS)
-def test_direct_linear_sgd_update_is_autograds_to_the_last_bit(
+def test_direct_linear_sgd_update_is_autograds_to_float32_rounding(
     kwargs: dict[str, Any], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """
     ``LinearPolicy``'s update of a linear q̂ on dense features, applied to W_a without autograd (for the per-step
-    mode's speed), gives the parameters and the log of autograd and ``torch.optim.SGD`` bit for bit:
+    mode's speed), gives the parameters and the log of autograd and ``torch.optim.SGD`` to float32 rounding:
     over tile coding's dense features on Mountain Car (its sparse path switched off), with a bias, Expected SARSA and
     updates of several transitions at once.
     """
     monkeypatch.setattr(LinearQPolicy, "_over_tiles", lambda self: None)
     direct_updates, (fast, general) = _linear_sarsa_runs(kwargs, 1200, "sgd_step", monkeypatch)
     assert direct_updates > 1000
-    assert all(th.equal(a, b) for a, b in zip(fast[0], general[0], strict=True))
-    assert fast[1] == general[1]
+    # Close, not equal: autograd's weight gradient is a matrix product (BLAS sums, whose order and use of FMA differ
+    # between CPUs) where the direct update adds each transition's row in turn; the tolerance of the tile-coded test
+    # below, whose sums differ in order at every step (3.8e-6 apart after these 1,200 steps)
+    for a, b in zip(fast[0], general[0], strict=True):
+        np.testing.assert_allclose(a.numpy(), b.numpy(), rtol=1e-5, atol=1e-5)
+    assert fast[1].keys() == general[1].keys()
+    for key, value in fast[1].items():
+        assert value == pytest.approx(general[1][key], rel=1e-5, abs=1e-5), key
     assert fast[0][0].abs().max() > 0.1, "the weights should have moved"
 
 

@@ -265,10 +265,10 @@ def _indices(
 
 
 def hash_tiles(coordinates: th.Tensor, hash_size: int) -> th.Tensor:
-    """
-    Hash each tile (t, c_{t,0}, …, c_{t,D−1}) to an index in [0, ``hash_size``), as ``tiles3``'s
+    r"""
+    Hash each tile :math:`(t, c_{t,0}, \dots, c_{t,D-1})` to an index in [0, ``hash_size``), as ``tiles3``'s
     ``hashcoords(coords, hash_size)`` does with Python's ``hash``, but vectorised and the same in every process: FNV-1's
-    multiply-xor step over the tiling number and the coordinates, modulo 2^31 − 1, then modulo ``hash_size``.
+    multiply-xor step over the tiling number and the coordinates, modulo :math:`2^{31} - 1`, then modulo ``hash_size``.
 
     Why not ``tiles3``'s index-hash table (``IHT``), which numbers tiles in the order they are first seen and so has
     no collisions until it is full: its indices depend on the order of the observations seen (features of the same
@@ -309,7 +309,7 @@ def tile_coordinates(
     :param low: lower end of the range of each dimension (one number for all, or one per dimension); below is clipped
     :param high: upper end of the range of each dimension; above is clipped
     :param origin: ``"low"`` (tiling 0's boundaries from ``low``) or ``"zero"`` (from 0, as the book's footnote)
-    :return: coordinates c_{t,d}, shape (batch, n_tilings, n_dims), int64
+    :return: coordinates :math:`c_{t,d}`, shape (batch, n_tilings, n_dims), int64
     :raises ValueError: if an argument is out of its domain (the message names it), or an observation holds NaN
     """
     observations = th.as_tensor(observations)
@@ -352,7 +352,7 @@ def tile_indices(
 
 
 class TileCoding(BaseFeaturesExtractor):
-    """
+    r"""
     Tile coding (Sutton & Barto §9.5.4) of a Box observation: n_tilings grid tilings of the range [low, high], each
     displaced from the first by t·(1, 3, 5, …)/n_tilings of a tile width (the book's asymmetric offsets), giving a
     binary feature vector with one 1 per tiling: the features of the book's linear methods (§9.5, Figs 10.1–10.4).
@@ -361,8 +361,9 @@ class TileCoding(BaseFeaturesExtractor):
     - Dense (``hash_size=None``): ``features_dim`` = n_tilings × Π(tiles_per_dim + 1), exactly n_tilings ones per
       observation (one in each tiling's block).
     - Hashed: ``features_dim`` = ``hash_size``; feature i counts the tilings whose tile hashes to i, so the features
-      still sum to n_tilings and a linear q̂ = w·x is Σ_t w[index_t], as with ``tiles3`` (a rare collision of two
-      tilings of one observation gives a 2).
+      still sum to n_tilings and a linear :math:`\hat q = \mathbf w^\top \mathbf x` is
+      :math:`\sum_t w[\text{index}_t]`, as with ``tiles3`` (a rare collision of two tilings of one observation gives
+      a 2).
 
     Observations outside [low, high] are clipped to it (they share the edge tiles). The computation is in float64
     (not on Apple's MPS device, which lacks it); the output is float32. The extractor has no parameters: with

@@ -13,13 +13,15 @@ SHORT_CORRIDOR_OPTIMAL_VALUE = -(6 + 4 * math.sqrt(2))
 
 
 def short_corridor_start_value(p_right: float) -> float:
-    """
-    The value v_π(s0) of the start state under the policy that goes right with probability ``p_right`` in every state
-    (the curve of Fig 13.1): solving v0 = −1 + p v1 + (1 − p) v0, v1 = −1 + p v0 + (1 − p) v2, v2 = −1 + (1 − p) v1
-    gives v_π(s0) = 2(p − 2) / (p(1 − p)), largest at p = 2 − √2 where it is −(6 + 4√2).
+    r"""
+    The value :math:`v_\pi(s_0)` of the start state under the policy that goes right with probability ``p_right`` in
+    every state (the curve of Fig 13.1): solving :math:`v_0 = -1 + p v_1 + (1 - p) v_0`,
+    :math:`v_1 = -1 + p v_0 + (1 - p) v_2`, :math:`v_2 = -1 + (1 - p) v_1` gives
+    :math:`v_\pi(s_0) = 2(p - 2) / (p(1 - p))`, largest at :math:`p = 2 - \sqrt 2` where it is
+    :math:`-(6 + 4\sqrt 2)`.
 
     :param p_right: probability of action "right", in [0, 1]
-    :return: v_π(s0) (γ = 1), −inf at p = 0 or 1 (the goal is never reached)
+    :return: :math:`v_\pi(s_0)` (γ = 1), −inf at p = 0 or 1 (the goal is never reached)
     :raises ValueError: if ``p_right`` is not in [0, 1]
     """
     if not 0.0 <= p_right <= 1.0:
@@ -30,16 +32,17 @@ def short_corridor_start_value(p_right: float) -> float:
 
 
 class ShortCorridorEnv(Env[np.ndarray, np.int64]):
-    """
+    r"""
     The short corridor with switched actions (Sutton & Barto Example 13.1): three non-terminal states s0, s1, s2 in a
     row and the goal (terminal) to the right of s2. Every step gives reward −1 (γ = 1 in the book). In s0 "left" does
     not move; in s1 the actions are switched ("right" moves left, "left" moves right). Episodes start in s0.
 
     The state is not observed: as in the book, where the features are x(s, right) = [1, 0] and x(s, left) = [0, 1] for
     every s, all states look alike. The observation is the constant 1.0 (Box [0, 1], shape (1,), float32), so a linear
-    policy without bias has logits h(s, a, θ) = W[a, 0] · 1: the book's parameterisation with θ = (W[1, 0], W[0, 0])
-    (θ_right, θ_left), π(right) = softmax(W)[1] (eq. 13.2). A linear state-value baseline without bias is then one
-    number v̂(s, w) = w, the book's choice for Fig 13.2.
+    policy without bias has logits :math:`h(s, a, \boldsymbol\theta) = W[a, 0] \cdot 1`: the book's parameterisation
+    with :math:`\boldsymbol\theta = (W[1, 0], W[0, 0]) = (\theta_\text{right}, \theta_\text{left})`,
+    :math:`\pi(\text{right}) = \operatorname{softmax}(W)[1]` (eq. 13.2). A linear state-value baseline without bias is
+    then one number, :math:`\hat v(s, w) = w`, the book's choice for Fig 13.2.
 
     Actions: Discrete(2), 0 = left, 1 = right. ``info["state"]`` is the true state (0, 1, 2, or 3 for the goal).
 

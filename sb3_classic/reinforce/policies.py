@@ -29,10 +29,11 @@ from sb3_classic.common.utils import check_bool
 
 
 class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
-    """
-    The two networks of REINFORCE with baseline (Sutton & Barto §13.4): the policy π(a|s, θ) and the baseline
-    v̂(s, w). They are separate networks by default (``net_arch=dict(pi=[64, 64], vf=[64, 64])``, no shared
-    features extractor) with separate optimizers, so each has its own learning rate (α^θ and α^w).
+    r"""
+    The two networks of REINFORCE with baseline (Sutton & Barto §13.4): the policy :math:`\pi(a \mid s,
+    \boldsymbol\theta)` and the baseline :math:`\hat v(s, \mathbf w)`. They are separate networks by default
+    (``net_arch=dict(pi=[64, 64], vf=[64, 64])``, no shared features extractor) with separate optimizers, so each has
+    its own learning rate (:math:`\alpha^{\boldsymbol\theta}` and :math:`\alpha^{\mathbf w}`).
     The action distributions are SB3's (Discrete, Box, MultiDiscrete, MultiBinary); the networks work with action
     indices and ``predict`` returns the env's values (``start`` of ``Discrete``/``MultiDiscrete`` added).
 
@@ -55,9 +56,10 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         layers; output layers keep PyTorch's default), ``"default"`` (PyTorch's default everywhere), or a number:
         every weight starts at that constant and every bias at 0 (the book's linear methods start at 0)
     :param with_bias: whether the linear layers have a bias (SB3's ``create_mlp`` name). The book's linear policy
-        h(s, a, θ) = θᵀx(s, a) (S&B eq. 13.3) and baseline v̂(s, w) = wᵀx(s) are ``net_arch=[], with_bias=False``
-    :param use_baseline: build the value network v̂(s, w) and its optimizer (REINFORCE with baseline, §13.4); False
-        builds none (plain REINFORCE, §13.3)
+        :math:`h(s, a, \boldsymbol\theta) = \boldsymbol\theta^\top \mathbf x(s, a)` (S&B eq. 13.3) and baseline
+        :math:`\hat v(s, \mathbf w) = \mathbf w^\top \mathbf x(s)` are ``net_arch=[], with_bias=False``
+    :param use_baseline: build the value network :math:`\hat v(s, \mathbf w)` and its optimizer (REINFORCE with
+        baseline, §13.4); False builds none (plain REINFORCE, §13.3)
     :param log_std_init: initial log standard deviation of Gaussian actions (Box action spaces)
     :param features_extractor_class: features extractor to use
     :param features_extractor_kwargs: keyword arguments to pass to the features extractor

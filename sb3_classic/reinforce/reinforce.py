@@ -52,38 +52,45 @@ def categorical_inverse_cdf(logits: np.ndarray, rng: np.random.Generator) -> np.
 
 
 class REINFORCE(ClassicOnPolicyAlgorithm):
-    """
+    r"""
     REINFORCE with baseline: Monte-Carlo policy gradient with a learned state-value baseline
     (Williams 1992; Sutton & Barto, Reinforcement Learning: An Introduction, 2nd ed., §13.4).
 
-    Each update uses ``n_episodes`` complete episodes. For every step t of them, with the Monte-Carlo return
-    G_t = Σ_{k=t+1}^{T} γ^{k−t−1} R_k and δ_t = G_t − v̂(S_t, w):
+    Each update uses ``n_episodes`` complete episodes. For every step t of them, with the Monte-Carlo return and its
+    difference from the baseline
 
-    - the value network follows w ← w + α^w δ_t ∇v̂(S_t, w);
-    - the policy network follows θ ← θ + α^θ δ_t ∇ln π(A_t|S_t, θ),
+    .. math::
+
+        G_t = \sum_{k=t+1}^{T} \gamma^{k-t-1} R_k, \qquad \delta_t = G_t - \hat v(S_t, \mathbf w),
+
+    - the value network follows :math:`\mathbf w \leftarrow \mathbf w + \alpha^{\mathbf w} \delta_t \nabla \hat v(S_t,
+      \mathbf w)`;
+    - the policy network follows :math:`\boldsymbol\theta \leftarrow \boldsymbol\theta + \alpha^{\boldsymbol\theta}
+      \delta_t \nabla \ln \pi(A_t \mid S_t, \boldsymbol\theta)`,
 
     ``update_mode`` says how an update applies them:
 
     - ``"batch"`` (the default): one gradient step of each network on the *mean* over the batch's steps, as A2C and
       most implementations do. Each step t then moves the weights by α/T of its own update for an episode of T
       steps, and T changes during training;
-    - ``"per_step"``: the book's loop over the episode, t = 0, …, T − 1 (§13.4's box): δ_t from the current w, the
-      value update with α^w, then the policy update with α^θ, each with the full step size. With plain SGD
+    - ``"per_step"``: the book's loop over the episode, t = 0, …, T − 1 (§13.4's box): :math:`\delta_t` from the
+      current :math:`\mathbf w`, the value update with :math:`\alpha^{\mathbf w}`, then the policy update with
+      :math:`\alpha^{\boldsymbol\theta}`, each with the full step size. With plain SGD
       (``policy_kwargs=dict(optimizer_class=th.optim.SGD)``), one env, ``n_episodes=1`` and ``gamma_t_factor=True``
-      (the box's γ^t; or γ = 1) it is the book's algorithm to the last bit.
+      (the box's :math:`\gamma^t`; or γ = 1) it is the book's algorithm to the last bit.
 
     Why batch by default: the settings of ``hyperparams/reinforce.yml`` (Adam, the seed report's learning rates)
     were found and benchmarked with it; the per-step mode makes T optimizer steps per episode instead of one
     (hundreds on Acrobot-v1), so the same learning rates are not comparable between the modes.
 
-    The book's update also has a factor γ^t (``gamma_t_factor=True``). It is off by default, as in most
+    The book's update also has a factor :math:`\gamma^t` (``gamma_t_factor=True``). It is off by default, as in most
     implementations and in the seed report's results: it makes the gradient the exact gradient of the discounted
-    return from the start state, but it scales the updates of late steps down to nothing (γ^500 ≈ 0.007 for
-    γ = 0.99), which slows learning on long episodes.
+    return from the start state, but it scales the updates of late steps down to nothing (:math:`\gamma^{500} \approx
+    0.007` for γ = 0.99), which slows learning on long episodes.
 
-    ``use_baseline=False`` is plain REINFORCE (§13.3, eq. 13.8): no value network is built, δ_t is G_t, and
-    ``value_learning_rate`` is unused. Without v̂ there is nothing to bootstrap a time-limit truncation from: the
-    return ends there, as with ``handle_timeout_termination=False``.
+    ``use_baseline=False`` is plain REINFORCE (§13.3, eq. 13.8): no value network is built, :math:`\delta_t` is
+    :math:`G_t`, and ``value_learning_rate`` is unused. Without v̂ there is nothing to bootstrap a time-limit
+    truncation from: the return ends there, as with ``handle_timeout_termination=False``.
 
     With several envs, an update takes every episode that has ended, and an env whose episode is still running
     keeps it for a later update: nothing is thrown away, and long episodes are not dropped in favour of short
@@ -93,25 +100,26 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
     Invalid-action masking (Discrete, MultiDiscrete, MultiBinary actions) works as in sb3-contrib's MaskablePPO: when
     the env supports it (an ``action_masks()`` method, or sb3-contrib's ``ActionMasker`` wrapper) and
     ``learn(use_masking=True)`` (the default), π is sb3-contrib's masked distribution in the rollouts and in the
-    update: ln π(A_t|S_t, θ) is over the legal actions of S_t (its mask, stored with the step), an illegal action's
-    logit gets no gradient, and the entropy bonus is over the legal actions. ``predict(obs, action_masks=...)``
-    takes masks as MaskablePPO's does (sb3-contrib's ``MaskableEvalCallback`` and ``evaluate_policy`` pass them).
-    Unlike MaskablePPO, an env without masks trains unmasked. The baseline v̂(S_T) of a truncation's final state
-    does not depend on masks.
+    update: :math:`\ln \pi(A_t \mid S_t, \boldsymbol\theta)` is over the legal actions of :math:`S_t` (its mask,
+    stored with the step), an illegal action's logit gets no gradient, and the entropy bonus is over the legal
+    actions. ``predict(obs, action_masks=...)`` takes masks as MaskablePPO's does (sb3-contrib's
+    ``MaskableEvalCallback`` and ``evaluate_policy`` pass them). Unlike MaskablePPO, an env without masks trains
+    unmasked. The baseline :math:`\hat v(S_T)` of a truncation's final state does not depend on masks.
 
     :param policy: the policy model to use (``"MlpPolicy"``, ``"CnnPolicy"``, ``"MultiInputPolicy"``)
     :param env: the environment to learn from (if registered in Gymnasium, can be str)
-    :param learning_rate: learning rate α^θ of the policy network (a float or an SB3 schedule of the remaining
-        progress); the seed report's best: 0.003 on CartPole-v1, 0.001 on Acrobot-v1
-    :param value_learning_rate: learning rate α^w of the value network (float or SB3 schedule); the seed report's
-        best: 0.01 on CartPole-v1, 0.1 on Acrobot-v1
+    :param learning_rate: learning rate :math:`\alpha^{\boldsymbol\theta}` of the policy network (a float or an SB3
+        schedule of the remaining progress); the seed report's best: 0.003 on CartPole-v1, 0.001 on Acrobot-v1
+    :param value_learning_rate: learning rate :math:`\alpha^{\mathbf w}` of the value network (float or SB3
+        schedule); the seed report's best: 0.01 on CartPole-v1, 0.1 on Acrobot-v1
     :param n_episodes: complete episodes per update (all envs together; an update takes every episode that has
         ended, so it may use more)
     :param update_mode: ``"batch"`` (one gradient step of each network on the batch mean) or ``"per_step"`` (the
         book's T updates per episode with the full step sizes), see above
-    :param use_baseline: learn v̂(s, w) and use δ_t = G_t − v̂(S_t, w) (§13.4); False: plain REINFORCE (§13.3)
+    :param use_baseline: learn :math:`\hat v(s, \mathbf w)` and use :math:`\delta_t = G_t - \hat v(S_t, \mathbf w)`
+        (§13.4); False: plain REINFORCE (§13.3)
     :param gamma: discount factor γ
-    :param gamma_t_factor: multiply the policy gradient of step t by γ^t as in the book (see above)
+    :param gamma_t_factor: multiply the policy gradient of step t by :math:`\gamma^t` as in the book (see above)
     :param normalize_advantage: standardise δ over the batch before the policy gradient (the value network still
         regresses on the raw returns)
     :param ent_coef: entropy bonus coefficient of the policy loss
@@ -420,12 +428,16 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
 
         :return: the update's steps (``_training_batch``), None if no episode has ended
         """
-        self.policy.set_training_mode(True)
         schedules = [(self.policy.optimizer, self.lr_schedule, "train/learning_rate")]
         if self.policy.value_optimizer is not None:
             schedules.append((self.policy.value_optimizer, self.value_lr_schedule, "train/value_learning_rate"))
         self._update_learning_rates(schedules)
-        return self._training_batch()
+        # v̂(S_T) of the truncations is no training batch: evaluation mode (dropout off, BatchNorm's running statistics
+        # unmoved), as A2C/PPO compute their bootstrap values; training mode for the gradient steps only
+        self.policy.set_training_mode(False)
+        batch = self._training_batch()
+        self.policy.set_training_mode(True)
+        return batch
 
     def _finish_update(
         self,

@@ -51,14 +51,23 @@ LOG_EVERY_STEPS = 128
 
 
 class NStepSARSA(ClassicOnPolicyAlgorithm):
-    """
+    r"""
     Episodic semi-gradient n-step SARSA (Sutton & Barto, Reinforcement Learning: An Introduction, 2nd ed., §10.2)
-    with a neural network q̂(s, a, w) and an ε-greedy behaviour policy.
+    with a neural network :math:`\hat q(s, a, \mathbf w)` and an ε-greedy behaviour policy.
 
-    Each transition (S_t, A_t) is trained once towards its n-step return
-    G_{t:t+n} = R_{t+1} + γR_{t+2} + … + γ^{n−1}R_{t+n} + γ^n q̂(S_{t+n}, A_{t+n}) (eq. 10.4), where A_{t+n} is the
-    action the agent actually took, with no bootstrap past a termination: w ← w + α[G_{t:t+n} − q̂(S_t, A_t, w)]
-    ∇q̂(S_t, A_t, w) (eq. 10.5). The gradient does not flow through the target (semi-gradient).
+    Each transition :math:`(S_t, A_t)` is trained once towards its n-step return (eq. 10.4)
+
+    .. math::
+
+        G_{t:t+n} = R_{t+1} + \gamma R_{t+2} + \dots + \gamma^{n-1} R_{t+n} + \gamma^n \hat q(S_{t+n}, A_{t+n}),
+
+    where :math:`A_{t+n}` is the action the agent actually took, with no bootstrap past a termination (eq. 10.5):
+
+    .. math::
+
+        \mathbf w \leftarrow \mathbf w + \alpha [G_{t:t+n} - \hat q(S_t, A_t, \mathbf w)] \nabla \hat q(S_t, A_t, \mathbf w).
+
+    The gradient does not flow through the target (semi-gradient).
 
     Every ``train_freq`` steps per env, an update trains on every transition whose target has become known (a
     transition waits until its n steps are taken: every target is a full n-step return), with the weights at the
@@ -71,23 +80,26 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
       ``policy="LinearPolicy"`` (``LinearQPolicy``) is the book's linear q̂ with its own SGD update.
 
     Options that are not in §10.2's algorithm (all off by default): a slowly-moving bootstrap network
-    (``target_update_interval``, ``tau``: SB3's DQN names), truncated λ-returns G^λ_{t:t+n} (``td_lambda``, §12.3, as
-    CleanRL's PQN), LayerNorm (``policy_kwargs=dict(layer_norm=True)``), and a greedy policy from a Polyak average of
-    q̂'s weights (``averaging_tau``), which keeps a q̂ that passes through a bad state for an update or two from showing
-    it in evaluations.
+    (``target_update_interval``, ``tau``: SB3's DQN names), truncated λ-returns :math:`G^\lambda_{t:t+n}`
+    (``td_lambda``, §12.3, as CleanRL's PQN), LayerNorm (``policy_kwargs=dict(layer_norm=True)``), and a greedy policy
+    from a Polyak average of q̂'s weights (``averaging_tau``), which keeps a q̂ that passes through a bad state for an
+    update or two from showing it in evaluations.
 
     The greedy action breaks ties at random (the book's ``argmax``), except in ``predict(deterministic=True)``, which
     takes the first so that it stays reproducible. At a time-limit truncation the target bootstraps from the final
-    state with the ε-greedy expectation (1 − ε) max_a q̂ + ε mean_a q̂ (eq. 7.8: no action is taken there); with
-    ``expected_sarsa=True`` every bootstrap does (n-step Expected SARSA, eq. 7.7).
+    state with the ε-greedy expectation :math:`(1 - \varepsilon) \max_a \hat q + \varepsilon \operatorname{mean}_a \hat q`
+    (eq. 7.8: no action is taken there); with ``expected_sarsa=True`` every bootstrap does (n-step Expected SARSA,
+    eq. 7.7).
 
     Invalid-action masking works as in sb3-contrib's MaskablePPO: when the env supports it (an ``action_masks()``
     method, or sb3-contrib's ``ActionMasker`` wrapper) and ``learn(use_masking=True)`` (the default), the ε-greedy
-    policy is over the legal actions L(s): argmax_{a ∈ L(s)} q̂(s, a), and with probability ε an action drawn uniformly
-    from L(s). The mask of every S_t is stored with it, so G_{t:t+n}'s bootstrap follows the mask of S_{t+n}, and the
-    ε-greedy expectation is the masked policy's, (1 − ε) max_{a ∈ L} q̂ + ε mean_{a ∈ L} q̂: an illegal action's q̂ is
-    never a target. The final state of a truncation takes the mask its env reports in ``info["action_mask"]`` (a VecEnv
-    resets a finished env before ``action_masks()`` can be read again), and allows every action if it reports none.
+    policy is over the legal actions :math:`L(s)`: :math:`\operatorname{argmax}_{a \in L(s)} \hat q(s, a)`, and with
+    probability ε an action drawn uniformly from :math:`L(s)`. The mask of every :math:`S_t` is stored with it, so
+    :math:`G_{t:t+n}`'s bootstrap follows the mask of :math:`S_{t+n}`, and the ε-greedy expectation is the masked
+    policy's, :math:`(1 - \varepsilon) \max_{a \in L} \hat q + \varepsilon \operatorname{mean}_{a \in L} \hat q`: an
+    illegal action's q̂ is never a target. The final state of a truncation takes the mask its env reports in
+    ``info["action_mask"]`` (a VecEnv resets a finished env before ``action_masks()`` can be read again), and allows
+    every action if it reports none.
     ``predict(obs, action_masks=...)`` takes masks as MaskablePPO's does. Unlike MaskablePPO, an env without masks
     trains unmasked.
 
@@ -104,13 +116,15 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         (each transition's own update with the full step size, in time order: the book's), see above
     :param gamma: discount factor γ
     :param expected_sarsa: bootstrap from the ε-greedy expectation of q̂ instead of q̂ of the action taken
-    :param td_lambda: λ of the truncated λ-return G^λ_{t:t+n} (S&B §12.3, eq. 12.9), the target of each transition:
-        the k-step returns G_{t:t+k} of its n-step window (k = 1, …, n) averaged with weights (1 − λ)λ^{k−1}, and
-        λ^{n−1} for the n-step one. 1 (the default) is the n-step return G_{t:t+n} of §10.2, 0 the one-step return.
-        Not in §10.2's algorithm (with λ < 1 it is the forward view of n-step-truncated SARSA(λ), as CleanRL's PQN
-        uses λ-returns); each update then computes q̂ of every stored step once more
-    :param exploration_schedule: ``"exponential"``: ε ← max(ε_final, ε · ``exploration_decay_rate``) at the end of
-        every episode (the seed report's); ``"linear"``: from initial to final over ``exploration_fraction`` of
+    :param td_lambda: λ of the truncated λ-return :math:`G^\lambda_{t:t+n}` (S&B §12.3, eq. 12.9), the target of each
+        transition: the k-step returns :math:`G_{t:t+k}` of its n-step window (k = 1, …, n) averaged with weights
+        :math:`(1 - \lambda)\lambda^{k-1}`, and :math:`\lambda^{n-1}` for the n-step one. 1 (the default) is the n-step
+        return :math:`G_{t:t+n}` of §10.2, 0 the one-step return. Not in §10.2's algorithm (with λ < 1 it is the
+        forward view of n-step-truncated SARSA(λ), as CleanRL's PQN uses λ-returns); each update then computes q̂ of
+        every stored step once more
+    :param exploration_schedule: ``"exponential"``: :math:`\varepsilon \leftarrow \max(\varepsilon_\text{final},
+        \varepsilon \rho)` with ρ = ``exploration_decay_rate``, at the end of every episode (the seed report's);
+        ``"linear"``: from initial to final over ``exploration_fraction`` of
         each ``learn()`` call (SB3's DQN); or a schedule: a callable of the progress remaining (1 at the start of each
         ``learn()`` call, 0 at its end) returning ε in [0, 1], such as SB3's ``LinearSchedule`` or
         ``ConstantSchedule`` (SB3's DQN keeps its schedule under this name: one assigned to ``model.exploration_schedule``
@@ -126,11 +140,12 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         many env steps (all envs together), by ``tau``; None bootstraps from q̂ itself, as the book does
     :param tau: the soft update coefficient of the copy ("Polyak update", between 0 and 1; 1 copies q̂)
     :param averaging_tau: the greedy policy of ``predict`` (and so of every evaluation) from a Polyak average of q̂'s
-        weights, w̄ ← τw + (1 − τ)w̄ after every update, with this τ (``policy.q_net_average``; weight averaging as in
-        Nikishin et al. 2018, "Improving Stability in Deep Reinforcement Learning with Weight Averaging"); training
-        and the ε-greedy behaviour policy are unchanged. None (the default, the book's): the greedy policy is q̂'s
-    :param loss_function: ``"mse"`` (½(G − q̂)², the book's update) or ``"huber"`` (the same within 1 of the target,
-        linear beyond)
+        weights, :math:`\bar{\mathbf w} \leftarrow \tau \mathbf w + (1 - \tau) \bar{\mathbf w}` after every update,
+        with this τ (``policy.q_net_average``; weight averaging as in Nikishin et al. 2018, "Improving Stability in Deep
+        Reinforcement Learning with Weight Averaging"); training and the ε-greedy behaviour policy are unchanged. None
+        (the default, the book's): the greedy policy is q̂'s
+    :param loss_function: ``"mse"`` (:math:`\tfrac12 (G - \hat q)^2`, the book's update) or ``"huber"`` (the same
+        within 1 of the target, linear beyond)
     :param max_grad_norm: clip the gradient norm to this; None for no clipping
     :param lr_decay_factor: multiply the learning rate by this at each decay (1.0: no decay)
     :param lr_decay_every: decay every this many ``lr_decay_unit`` (like PyTorch's ``StepLR``)
@@ -545,11 +560,15 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
 
         :return: (S_t, A_t, G_{t:t+n}) of every transition whose n steps have been taken (S&B eq. 10.4), None if none
         """
-        self.policy.set_training_mode(True)
         self._update_learning_rates([(self.policy.optimizer, self.lr_schedule, "train/learning_rate")])
         self._update_exploration_rate()
         self.logger.record("rollout/exploration_rate", self.exploration_rate)
-        return self._training_batch()
+        # The targets' bootstrap values are no training batch: evaluation mode (dropout off, BatchNorm's running
+        # statistics unmoved), as SB3's DQN computes its targets; training mode for the gradient steps only
+        self.policy.set_training_mode(False)
+        batch = self._training_batch()
+        self.policy.set_training_mode(True)
+        return batch
 
     def _finish_update(self, batch: TrainingBatch, n_chunks: int, q_first: list[np.ndarray], losses: list[float]) -> None:
         """

@@ -46,9 +46,9 @@ class TileWeights(NamedTuple):
 
 
 class SARSAPolicy(EnvActionsMixin, BasePolicy):
-    """
-    The action-value network q̂(s, a, w) of semi-gradient SARSA (Sutton & Barto §10.1–10.2), with its optimizer.
-    It is SB3's DQN ``QNetwork`` without a target network: SARSA bootstraps from the online network.
+    r"""
+    The action-value network :math:`\hat q(s, a, \mathbf w)` of semi-gradient SARSA (Sutton & Barto §10.1–10.2), with
+    its optimizer. It is SB3's DQN ``QNetwork`` without a target network: SARSA bootstraps from the online network.
     ``predict`` is greedy, in the env's action values (``start`` of the ``Discrete`` space added; q̂'s outputs are
     indexed from 0), with ties broken at random unless ``deterministic=True``; the ε-greedy behaviour policy lives in
     ``NStepSARSA``, as ε is training state.
@@ -63,8 +63,9 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         layer keeps PyTorch's default), ``"orthogonal"`` (SB3's A2C/PPO scheme: gain √2 hidden, 1 output),
         ``"default"`` (PyTorch's default everywhere, as SB3's DQN), or a number: every weight starts at that constant
         and every bias at 0 (the book's linear methods start at 0)
-    :param with_bias: whether the linear layers have a bias (SB3's ``create_mlp`` name). The book's linear q̂(s, a, w)
-        = wᵀx(s, a) with its own SGD update is ``LinearQPolicy`` (``"LinearPolicy"``)
+    :param with_bias: whether the linear layers have a bias (SB3's ``create_mlp`` name). The book's linear
+        :math:`\hat q(s, a, \mathbf w) = \mathbf w^\top \mathbf x(s, a)` with its own SGD update is ``LinearQPolicy``
+        (``"LinearPolicy"``)
     :param layer_norm: LayerNorm after every hidden linear layer, before its activation (as CleanRL's PQN, which
         learns with on-policy Q-targets from the online network: it keeps the features' scale, and so the targets',
         from drifting)
@@ -214,7 +215,7 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         return self.q_net(obs_as_tensor(observations, self.device)).detach().cpu().numpy()
 
     def forward(self, obs: PyTorchObs, deterministic: bool = True) -> th.Tensor:
-        """:return: the greedy actions argmax_a q̂(obs, a)"""
+        r""":return: the greedy actions :math:`\operatorname{argmax}_a \hat q(\text{obs}, a)`"""
         return self._predict(obs, deterministic=deterministic)
 
     def make_q_net(self) -> QNetwork:
@@ -320,20 +321,28 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
 
 
 class LinearQPolicy(SARSAPolicy):
-    """
-    The book's linear action-value function q̂(s, a, w) = W_a x(s) (+ b_a) over features x(s) without parameters
-    (Sutton & Barto §9.4, §10.1: ``TileCoding``'s, or the observation itself), with its own SGD update (``sgd_step``)
-    in place of autograd and the optimizer's step. ``NStepSARSA`` trains it with that update (``policy="LinearPolicy"``).
+    r"""
+    The book's linear action-value function :math:`\hat q(s, a, \mathbf w) = W_a \mathbf x(s)\ (+\, b_a)` over features
+    :math:`\mathbf x(s)` without parameters (Sutton & Barto §9.4, §10.1: ``TileCoding``'s, or the observation itself),
+    with its own SGD update (``sgd_step``) in place of autograd and the optimizer's step. ``NStepSARSA`` trains it with
+    that update (``policy="LinearPolicy"``).
 
-    The gradient of a linear q̂ is ∇_{W_a} q̂(s, a, w) = x(s) (§9.4, after eq. 9.8), so the update of eq. 10.5 is
-    W_a ← W_a + α[G − q̂(S_t, A_t, w)] x(S_t) (eq. 9.9): ``sgd_step`` applies it to the weights without autograd, the
-    same arithmetic as autograd's gradient of ½(G − q̂)² and ``torch.optim.SGD``'s step (the same weights to the last
-    bit for one transition), at a fraction of the cost: the book's per-step loop makes this update at every env step.
+    The gradient of a linear q̂ is :math:`\nabla_{W_a} \hat q(s, a, \mathbf w) = \mathbf x(s)` (§9.4, after eq. 9.8),
+    so the update of eq. 10.5 is (eq. 9.9)
+
+    .. math::
+
+        W_a \leftarrow W_a + \alpha [G - \hat q(S_t, A_t, \mathbf w)]\, \mathbf x(S_t):
+
+    ``sgd_step`` applies it to the weights without autograd, the same arithmetic as autograd's gradient of
+    :math:`\tfrac12 (G - \hat q)^2` and ``torch.optim.SGD``'s step (the same weights to the last bit for one
+    transition), at a fraction of the cost: the book's per-step loop makes this update at every env step.
     Over ``TileCoding`` on the CPU, q̂ and the update go over the active tiles as the book's ``tiles3`` code does (S&B
-    §9.5.4): q̂(s, a) = Σ_i W[a, i(s)] over the active tiles i(s), and α[G − q̂] added to each active tile's weight,
-    without the dense x(s): the same values to float32 rounding (the sum's order differs), several times faster
-    (``benchmarks/results/hot_paths.md``). A ``torch.nn.EmbeddingBag(mode="sum")`` over the tiles with
-    ``torch.optim.SGD`` makes the same update, at many times the cost per update.
+    §9.5.4): :math:`\hat q(s, a) = \sum_i W[a, i(s)]` over the active tiles :math:`i(s)`, and
+    :math:`\alpha [G - \hat q]` added to each active tile's weight, without the dense :math:`\mathbf x(s)`: the same
+    values to float32 rounding (the sum's order differs), several times faster (``benchmarks/results/hot_paths.md``).
+    A ``torch.nn.EmbeddingBag(mode="sum")`` over the tiles with ``torch.optim.SGD`` makes the same update, at many
+    times the cost per update.
 
     ``optimizer`` is a plain ``torch.optim.SGD``: it holds the learning rate α that the schedules set, and its state
     is saved as for every policy, but its ``step`` is not called.
@@ -343,8 +352,9 @@ class LinearQPolicy(SARSAPolicy):
     :param lr_schedule: learning-rate schedule (could be constant)
     :param weight_init: the initial weights: a number (every weight that constant, every bias 0; the book's linear
         methods start at 0, the default) or ``SARSAPolicy``'s schemes
-    :param with_bias: whether q̂ has a bias b_a (the book's q̂ = wᵀx has none, the default)
-    :param features_extractor_class: the features x(s): an extractor without parameters (``TileCoding``,
+    :param with_bias: whether q̂ has a bias :math:`b_a` (the book's :math:`\hat q = \mathbf w^\top \mathbf x` has none,
+        the default)
+    :param features_extractor_class: the features :math:`\mathbf x(s)`: an extractor without parameters (``TileCoding``,
         ``FlattenExtractor``)
     :param optimizer_class: ``torch.optim.SGD`` (the update is plain SGD)
     :param optimizer_kwargs: SGD's arguments other than the learning rate, at their defaults (no momentum, dampening,
@@ -486,9 +496,10 @@ class LinearQPolicy(SARSAPolicy):
         return tiles
 
     def q_values(self, observations: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
-        """
-        ``SARSAPolicy.q_values``; over tiles, q̂(s, ·) = Σ_i W[·, i(s)] (+ b) over the active tiles i(s) (S&B §9.5.4,
-        the ``tiles3`` code's ``sum(w[tiles])``), without the dense x(s): the same values to float32 rounding.
+        r"""
+        ``SARSAPolicy.q_values``; over tiles, :math:`\hat q(s, \cdot) = \sum_i W[\cdot, i(s)]\ (+\, b)` over the active
+        tiles :math:`i(s)` (S&B §9.5.4, the ``tiles3`` code's ``sum(w[tiles])``), without the dense :math:`\mathbf x(s)`:
+        the same values to float32 rounding.
 
         :param observations: a batch of observations
         :return: q̂(s, ·, w) of each, shape (batch, n_actions), float32
@@ -505,16 +516,22 @@ class LinearQPolicy(SARSAPolicy):
     def sgd_step(
         self, observations: np.ndarray | dict[str, np.ndarray], actions: np.ndarray, targets: np.ndarray
     ) -> tuple[np.ndarray, float]:
-        """
-        One SGD step on the mean of ½(G − q̂(S_t, A_t, w))² over the given transitions, without autograd:
-        W_a ← W_a + (α/B) Σ_{t: A_t = a} [G_t − q̂(S_t, A_t, w)] x(S_t) (S&B eq. 10.5 with ∇q̂ = x, eq. 9.9), and the same
-        for b_a; one transition (B = 1) is the book's update. The learning rate α is the optimizer's. A frozen
-        parameter (``requires_grad=False``) is not changed, as the optimizer would leave it.
+        r"""
+        One SGD step on the mean of :math:`\tfrac12 (G - \hat q(S_t, A_t, \mathbf w))^2` over the given transitions,
+        without autograd (S&B eq. 10.5 with :math:`\nabla \hat q = \mathbf x`, eq. 9.9),
 
-        :param observations: S_t, a batch of B
-        :param actions: A_t as indices, shape (B,)
+        .. math::
+
+            W_a \leftarrow W_a + \frac{\alpha}{B} \sum_{t:\, A_t = a} [G_t - \hat q(S_t, A_t, \mathbf w)]\, \mathbf x(S_t),
+
+        and the same for :math:`b_a`; one transition (B = 1) is the book's update. The learning rate α is the
+        optimizer's. A frozen parameter (``requires_grad=False``) is not changed, as the optimizer would leave it.
+
+        :param observations: :math:`S_t`, a batch of B
+        :param actions: :math:`A_t` as indices, shape (B,)
         :param targets: the targets G, shape (B,), float32
-        :return: q̂(S_t, A_t, w) before the step, shape (B,), float32, and the loss (the mean of ½(G − q̂)²)
+        :return: :math:`\hat q(S_t, A_t, \mathbf w)` before the step, shape (B,), float32, and the loss (the mean of
+            :math:`\tfrac12 (G - \hat q)^2`)
         """
         over_tiles = self._over_tiles()
         if over_tiles is not None:
