@@ -30,32 +30,6 @@ from sb3_classic.common.utils import check_positive_int
 from sb3_classic.reinforce.policies import REINFORCEPolicy
 from sb3_classic.reinforce.reinforce import REINFORCE, reinforce_losses, softmax_cdf
 
-#: What the members of a population share: every argument but ``seed`` and ``env`` (and the env's shape)
-SHARED_SETTINGS = (
-    "policy_class",
-    "policy_kwargs",
-    "learning_rate",
-    "value_learning_rate",
-    "n_episodes",
-    "update_mode",
-    "use_baseline",
-    "gamma",
-    "gamma_t_factor",
-    "normalize_advantage",
-    "ent_coef",
-    "max_grad_norm",
-    "lr_decay_factor",
-    "lr_decay_every",
-    "lr_decay_milestones",
-    "lr_decay_unit",
-    "handle_timeout_termination",
-    "max_episode_length",
-    "n_envs",
-    "observation_space",
-    "action_space",
-    "device",
-)
-
 
 class REINFORCEPopulation:
     """
@@ -434,7 +408,7 @@ def check_members(models: Sequence[Any]) -> None:
         a setting not covered (actions other than Discrete, envs with action masks)
     :raises TypeError: for a member that is not ``REINFORCE``, or networks or optimizers not covered
     """
-    check_population(models, REINFORCE, SHARED_SETTINGS, _check_member)
+    check_population(models, REINFORCE, _check_member)
     # (raises for layers a stacked network does not hold)
     StackedMLP.from_sequentials([_policy_network(model.policy) for model in models], "π")
     if models[0].use_baseline:

@@ -27,39 +27,6 @@ from sb3_classic.common.utils import check_positive_int
 from sb3_classic.sarsa.nstep_sarsa import LOG_EVERY_STEPS, NStepSARSA, sarsa_losses
 from sb3_classic.sarsa.policies import LinearQPolicy
 
-#: What the members of a population share: every argument but ``seed`` and ``env`` (and the env's shape)
-SHARED_SETTINGS = (
-    "policy_class",
-    "policy_kwargs",
-    "learning_rate",
-    "n_steps",
-    "train_freq",
-    "gradient_steps",
-    "update_mode",
-    "gamma",
-    "expected_sarsa",
-    "td_lambda",
-    "exploration_schedule",
-    "exploration_initial_eps",
-    "exploration_final_eps",
-    "exploration_fraction",
-    "exploration_decay_rate",
-    "target_update_interval",
-    "tau",
-    "averaging_tau",
-    "loss_function",
-    "max_grad_norm",
-    "lr_decay_factor",
-    "lr_decay_every",
-    "lr_decay_milestones",
-    "lr_decay_unit",
-    "handle_timeout_termination",
-    "n_envs",
-    "observation_space",
-    "action_space",
-    "device",
-)
-
 
 class NStepSARSAPopulation:
     """
@@ -401,7 +368,7 @@ def check_members(models: Sequence[Any]) -> None:
     :raises ValueError: for no members, a model twice, members of different settings, or without a seed or an env
     :raises TypeError: for a member that is not ``NStepSARSA``, or a q̂ or optimizer not covered
     """
-    check_population(models, NStepSARSA, SHARED_SETTINGS, _check_member)
+    check_population(models, NStepSARSA, _check_member)
     # (raises for layers a stacked network does not hold)
     StackedMLP.from_sequentials([model.policy.q_net.q_net for model in models])
 
