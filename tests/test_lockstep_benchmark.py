@@ -118,3 +118,42 @@ def test_each_way_is_timed_on_fresh_members_at_every_repeat_and_the_medians_kept
     # each repeat: members for the separate runs, for the population, for the floor (not trained here: it is stubbed)
     assert len(built) == 9
     assert [models[0].num_timesteps for models in built] == [20, 20, 0] * 3
+
+
+def committed_rows() -> list[dict[str, str]]:
+    with open(lockstep.RESULTS / "lockstep.csv", newline="") as file:
+        return list(csv.DictReader(file))
+
+
+def guide_lines(start: tuple[str, ...]) -> list[list[str]]:
+    """:return: the guide's table rows that start with one of ``start``, as cells"""
+    text = (lockstep.RESULTS.parents[1] / "docs" / "guide" / "lockstep.md").read_text()
+    return [[cell.strip() for cell in line.strip("|").split("|")] for line in text.splitlines() if line.startswith(start)]
+
+
+def test_the_guide_s_speed_table_is_the_committed_comparison() -> None:
+    rows = committed_rows()
+    table = guide_lines(("| NStepSARSA |", "| REINFORCE |"))
+    assert len(table) == len(rows)
+    for cells, row in zip(table, rows, strict=True):
+        separate, in_lockstep, floor = row["separate_cpu_s"], row["lockstep_cpu_s"], row["floor_cpu_s"]
+        assert cells[:2] == [row["algo"], row["env_id"]]
+        assert cells[2].startswith(row["setting"].split(":")[0].replace("_", " ") + ",")
+        assert (f"{row['k']} seeds" in cells[2]) == (row["k"] != "10"), cells[2]
+        ratios = [lockstep.ratio(separate, in_lockstep), lockstep.ratio(separate, floor)]
+        assert cells[3:] == [separate, in_lockstep, *ratios], f"{cells} against {row}"
+
+
+def test_the_guide_s_first_screen_gives_the_committed_ratios() -> None:
+    # | NStepSARSA per step (…), CartPole-v1, Acrobot-v1 | 10 | 2.9×, 3.0× |: the CSV's ratios of those rows, in its order
+    rows = committed_rows()
+    table = guide_lines(("| NStepSARSA per step", "| NStepSARSA batch", "| REINFORCE per step", "| REINFORCE batch"))
+    assert len(table) == 5
+    covered = 0
+    for setting, k, ratios in table:
+        algo, family = setting.split()[0], setting.split()[1] + ("_step" if setting.split()[1] == "per" else "")
+        matching = [row for row in rows if (row["algo"], row["setting"].split(":")[0], row["k"]) == (algo, family, k)]
+        expected = [f"{float(row['separate_cpu_s']) / float(row['lockstep_cpu_s']):.1f}×" for row in matching]
+        assert ratios.split(", ") == expected, f"{setting}, {k} seeds: {ratios} against {expected}"
+        covered += len(matching)
+    assert covered == len(rows)
