@@ -95,34 +95,39 @@ def reinforce_losses(
     # δ_t = G_t − v̂(S_t, w) (S&B §13.4), from w before this step's update; the baseline is a constant for the policy
     # gradient. Plain REINFORCE: δ_t = G_t (§13.3)
     advantages = returns - values.detach()
-    policy_weights = advantages
     if lengths is None:
         # (with K = 1 the bits of a batch's mean-reduced losses and their gradients)
-        if normalize_advantage and advantages.shape[1] > 1:
-            mean, std = advantages.mean(dim=1, keepdim=True), advantages.std(dim=1, keepdim=True)
-            policy_weights = (advantages - mean) / (std + 1e-8)
-        if gamma_t_factor:
-            policy_weights = policy_weights * gamma**episode_steps
-        # θ ← θ + α^θ γ^t δ_t ∇ln π(A_t|S_t, θ) (S&B §13.4, eq. 13.11 with b(S_t) = v̂(S_t, w); eq. 13.8 with b = 0)
-        policy_loss = -(policy_weights * log_prob).mean(dim=1)
-        # w ← w + α^w δ_t ∇v̂(S_t, w) (S&B §13.4): the gradient of ½ δ_t²
-        value_loss = 0.5 * ((returns - values) ** 2).mean(dim=1)
-        entropy_loss = -entropy.mean(dim=1)
+        def member_mean(x: th.Tensor) -> th.Tensor:
+            return x.mean(dim=1)
+
+        def standardised(a: th.Tensor) -> th.Tensor:
+            return (a - a.mean(dim=1, keepdim=True)) / (a.std(dim=1, keepdim=True) + 1e-8)
+
+        several = advantages.shape[1] > 1
     else:
-        # The same, each member's mean over its own steps: weight 1/T_k on its steps, 0 on the padding
+        # Each member's over its own steps: weight 1/T_k on its steps, 0 on the padding
         valid = th.arange(advantages.shape[1], device=advantages.device) < lengths[:, None]
         weights = valid / lengths[:, None]
-        if normalize_advantage:
-            # Standardised over each member's own batch (with torch's unbiased std), where it has more than one step
-            mean = (advantages * weights).sum(1, keepdim=True)
-            spread = ((advantages - mean) ** 2 * valid).sum(1, keepdim=True) / (lengths[:, None] - 1).clamp(min=1)
-            normalized = (advantages - mean) / (spread.sqrt() + 1e-8)
-            policy_weights = th.where(lengths[:, None] > 1, normalized, advantages)
-        if gamma_t_factor:
-            policy_weights = policy_weights * gamma**episode_steps
-        policy_loss = -(policy_weights * log_prob * weights).sum(1)
-        value_loss = 0.5 * ((returns - values) ** 2 * weights).sum(1)
-        entropy_loss = -(entropy * weights).sum(1)
+
+        def member_mean(x: th.Tensor) -> th.Tensor:
+            return (x * weights).sum(1)
+
+        def standardised(a: th.Tensor) -> th.Tensor:
+            # (torch's unbiased std; a member with one step keeps its δ_t)
+            mean = (a * weights).sum(1, keepdim=True)
+            spread = ((a - mean) ** 2 * valid).sum(1, keepdim=True) / (lengths[:, None] - 1).clamp(min=1)
+            return th.where(lengths[:, None] > 1, (a - mean) / (spread.sqrt() + 1e-8), a)
+
+        several = True
+    # Standardised over each member's own steps, where it has more than one
+    policy_weights = standardised(advantages) if normalize_advantage and several else advantages
+    if gamma_t_factor:
+        policy_weights = policy_weights * gamma**episode_steps
+    # θ ← θ + α^θ γ^t δ_t ∇ln π(A_t|S_t, θ) (S&B §13.4, eq. 13.11 with b(S_t) = v̂(S_t, w); eq. 13.8 with b = 0)
+    policy_loss = -member_mean(policy_weights * log_prob)
+    # w ← w + α^w δ_t ∇v̂(S_t, w) (S&B §13.4): the gradient of ½ δ_t²
+    value_loss = 0.5 * member_mean((returns - values) ** 2)
+    entropy_loss = -member_mean(entropy)
     total = policy_loss + ent_coef * entropy_loss
     if use_baseline:
         total = total + value_loss
