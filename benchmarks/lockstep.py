@@ -9,7 +9,9 @@ settings (``--settings``) per algorithm (``--algo``):
   ``fig24-reinforce-acrobot-final.yml``);
 - ``batch``: the tuned batch-mode entries of ``hyperparams/nstep_sarsa.yml`` (8 envs per seed, train_freq 16,
   gradient_steps 8, 2 × 256 MLP; Acrobot-v1's with its bootstrap network, weight average, λ-returns and Expected SARSA)
-  and of ``hyperparams/reinforce.yml`` (one env, one Adam step per episode).
+  and of ``hyperparams/reinforce.yml`` (one env, one Adam step per episode);
+- ``many_seeds``: NStepSARSA's per-step setting on CartPole-v1 with more seeds (``--many-k``, 30) and fewer env steps
+  per seed (``--many-steps``, 1,000).
 
     python -m benchmarks.lockstep                       # writes benchmarks/results/lockstep.{csv,md}
     python -m benchmarks.lockstep --k 10 --steps 3000 --settings per_step --repeats 1
@@ -52,7 +54,7 @@ RESULTS = Path(__file__).resolve().parent / "results"
 N_STEPS = {"CartPole-v1": 10, "Acrobot-v1": 5}
 SETTING = "per_step: 2x128 MLP, lr 5e-4, train_freq 1, gradient_steps 1"
 #: The families of settings, in the order of the tables
-SETTINGS = ("per_step", "batch")
+SETTINGS = ("per_step", "batch", "many_seeds")
 ALGOS = ("NStepSARSA", "REINFORCE")
 #: The seed report's per-step final models of REINFORCE, by figure
 FINAL_PER_STEP = {
@@ -305,6 +307,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--batch-steps", type=positive_int, default=20000, help="env steps per seed (all its envs) of the batch settings"
     )
+    parser.add_argument("--many-k", type=positive_int, default=30, help="seeds of the many_seeds row")
+    parser.add_argument("--many-steps", type=positive_int, default=1000, help="env steps per seed of the many_seeds row")
     parser.add_argument(
         "--repeats", type=positive_int, default=3, help="times each way is timed; the medians are reported (default 3)"
     )
@@ -321,6 +325,8 @@ def main(argv: list[str] | None = None) -> None:
         rows += per_step_rows(args.env, args.k, args.steps, args.repeats)
     if "NStepSARSA" in args.algo and "batch" in args.settings:
         rows += batch_rows(args.env, args.k, args.batch_steps, args.repeats)
+    if "NStepSARSA" in args.algo and "many_seeds" in args.settings:
+        rows += per_step_rows(["CartPole-v1"], args.many_k, args.many_steps, args.repeats)
     if "REINFORCE" in args.algo and "per_step" in args.settings:
         rows += reinforce_rows("per_step", args.env, args.k, args.steps, args.repeats)
     if "REINFORCE" in args.algo and "batch" in args.settings:

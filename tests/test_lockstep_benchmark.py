@@ -17,24 +17,26 @@ COLUMNS = ["algo", "env_id", "setting", "k", "separate_cpu_s", "lockstep_cpu_s",
 
 
 def test_the_benchmark_writes_one_row_per_algorithm_env_and_setting(tmp_path: Path) -> None:
-    lockstep.main(
-        ["--k", "2", "--steps", "60", "--batch-steps", "300", "--env", "CartPole-v1", "--repeats", "2", "--out", str(tmp_path)]
-    )
+    arguments = ["--k", "2", "--steps", "60", "--batch-steps", "300", "--many-k", "3", "--many-steps", "40"]
+    lockstep.main([*arguments, "--env", "CartPole-v1", "--repeats", "2", "--out", str(tmp_path)])
     with open(tmp_path / "lockstep.csv", newline="") as file:
         rows = list(csv.DictReader(file))
     assert list(rows[0]) == COLUMNS
     assert [(row["algo"], row["setting"].split(":")[0]) for row in rows] == [
         ("NStepSARSA", "per_step"),
         ("NStepSARSA", "batch"),
+        ("NStepSARSA", "per_step"),
         ("REINFORCE", "per_step"),
         ("REINFORCE", "batch"),
     ]
-    assert all(row["env_id"] == "CartPole-v1" and row["k"] == "2" for row in rows)
+    assert [row["k"] for row in rows] == ["2", "2", "3", "2", "2"]
+    assert all(row["env_id"] == "CartPole-v1" for row in rows)
     assert all(float(row["separate_cpu_s"]) > 0 and float(row["lockstep_cpu_s"]) > 0 for row in rows)
     page = (tmp_path / "lockstep.md").read_text()
     assert "python -m benchmarks.lockstep --k 2 --steps 60" in page
     table = [line.split(" | ") for line in page.splitlines() if line.startswith(("| NStepSARSA |", "| REINFORCE |"))]
-    assert [line[1] for line in table] == ["CartPole-v1"] * 4
+    assert [line[1] for line in table] == ["CartPole-v1"] * 5
+    assert [line[4] for line in table] == ["60", "300", "40", "60", "300"]
     for line, row in zip(table, rows, strict=True):
         # one after the other, lockstep, ratio, floor, at most: the CSV's seconds and their ratios
         assert line[5:9] == [row["separate_cpu_s"], row["lockstep_cpu_s"], line[7], row["floor_cpu_s"]]
@@ -81,11 +83,16 @@ def test_the_floor_clocks_each_stacked_call_and_env_step_once_and_leaves_them_as
     assert [getattr(owner, name) for owner, name in clocked] == before
 
 
-def test_the_committed_comparison_has_a_row_per_algorithm_env_and_setting_of_ten_seeds() -> None:
+def test_the_committed_comparison_has_a_row_per_algorithm_env_and_setting_of_ten_seeds_and_one_of_thirty() -> None:
     with open(lockstep.RESULTS / "lockstep.csv", newline="") as file:
         rows = list(csv.DictReader(file))
     assert rows
     assert list(rows[0]) == COLUMNS
+    many = [row for row in rows if row["k"] != "10"]
+    assert [(row["algo"], row["env_id"], row["setting"].split(":")[0], row["k"]) for row in many] == [
+        ("NStepSARSA", "CartPole-v1", "per_step", "30")
+    ]
+    rows = [row for row in rows if row["k"] == "10"]
     keys = {(row["algo"], row["env_id"], row["setting"].split(":")[0]) for row in rows}
     assert keys == {
         (algo, env_id, setting)
@@ -93,7 +100,7 @@ def test_the_committed_comparison_has_a_row_per_algorithm_env_and_setting_of_ten
         for env_id in ("CartPole-v1", "Acrobot-v1")
         for setting in ("per_step", "batch")
     }
-    assert all(row["k"] == "10" for row in rows)
+    assert len(rows) == len(keys)
 
 
 def test_each_way_is_timed_on_fresh_members_at_every_repeat_and_the_medians_kept() -> None:
@@ -111,3 +118,42 @@ def test_each_way_is_timed_on_fresh_members_at_every_repeat_and_the_medians_kept
     # each repeat: members for the separate runs, for the population, for the floor (not trained here: it is stubbed)
     assert len(built) == 9
     assert [models[0].num_timesteps for models in built] == [20, 20, 0] * 3
+
+
+def committed_rows() -> list[dict[str, str]]:
+    with open(lockstep.RESULTS / "lockstep.csv", newline="") as file:
+        return list(csv.DictReader(file))
+
+
+def guide_lines(start: tuple[str, ...]) -> list[list[str]]:
+    """:return: the guide's table rows that start with one of ``start``, as cells"""
+    text = (lockstep.RESULTS.parents[1] / "docs" / "guide" / "lockstep.md").read_text()
+    return [[cell.strip() for cell in line.strip("|").split("|")] for line in text.splitlines() if line.startswith(start)]
+
+
+def test_the_guide_s_speed_table_is_the_committed_comparison() -> None:
+    rows = committed_rows()
+    table = guide_lines(("| NStepSARSA |", "| REINFORCE |"))
+    assert len(table) == len(rows)
+    for cells, row in zip(table, rows, strict=True):
+        separate, in_lockstep, floor = row["separate_cpu_s"], row["lockstep_cpu_s"], row["floor_cpu_s"]
+        assert cells[:2] == [row["algo"], row["env_id"]]
+        assert cells[2].startswith(row["setting"].split(":")[0].replace("_", " ") + ",")
+        assert (f"{row['k']} seeds" in cells[2]) == (row["k"] != "10"), cells[2]
+        ratios = [lockstep.ratio(separate, in_lockstep), lockstep.ratio(separate, floor)]
+        assert cells[3:] == [separate, in_lockstep, *ratios], f"{cells} against {row}"
+
+
+def test_the_guide_s_first_screen_gives_the_committed_ratios() -> None:
+    # | NStepSARSA per step (…), CartPole-v1, Acrobot-v1 | 10 | 2.9×, 3.0× |: the CSV's ratios of those rows, in its order
+    rows = committed_rows()
+    table = guide_lines(("| NStepSARSA per step", "| NStepSARSA batch", "| REINFORCE per step", "| REINFORCE batch"))
+    assert len(table) == 5
+    covered = 0
+    for setting, k, ratios in table:
+        algo, family = setting.split()[0], setting.split()[1] + ("_step" if setting.split()[1] == "per" else "")
+        matching = [row for row in rows if (row["algo"], row["setting"].split(":")[0], row["k"]) == (algo, family, k)]
+        expected = [f"{float(row['separate_cpu_s']) / float(row['lockstep_cpu_s']):.1f}×" for row in matching]
+        assert ratios.split(", ") == expected, f"{setting}, {k} seeds: {ratios} against {expected}"
+        covered += len(matching)
+    assert covered == len(rows)

@@ -15,12 +15,27 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.type_aliases import MaybeCallback
 from torch import nn
 
+from sb3_classic.common.arguments import constructor_parameters
 from sb3_classic.common.masking import is_masking_supported
 from sb3_classic.common.stacked import StackedAdam, StackedMLP
 from sb3_classic.common.threads import one_thread_unless_chosen
 
 #: The remaining progress at which two schedules are compared (``same_setting``)
 SCHEDULE_PROBES = (1.0, 0.75, 0.5, 0.25, 0.0)
+#: The constructor's arguments each member has its own: its seed and env, and what only logs
+OWN_ARGUMENTS = frozenset(
+    {"self", "policy", "env", "seed", "verbose", "tensorboard_log", "stats_window_size", "_init_setup_model"}
+)
+
+
+def shared_settings(algorithm: type[BaseAlgorithm]) -> tuple[str, ...]:
+    """
+    :param algorithm: ``NStepSARSA`` or ``REINFORCE``
+    :return: the attributes the members of its population share: every argument of its constructor but
+        ``OWN_ARGUMENTS`` (``policy`` as ``policy_class``), and the shape of the members' envs
+    """
+    arguments = [name for name in constructor_parameters(algorithm) if name not in OWN_ARGUMENTS]
+    return ("policy_class", *arguments, "n_envs", "observation_space", "action_space")
 
 
 class MemberError(ValueError):
@@ -62,13 +77,12 @@ def same_setting(value: Any, other: Any) -> bool:
 def check_population(
     models: Sequence[Any],
     algorithm: type[BaseAlgorithm],
-    shared_settings: Sequence[str],
     check_member: Callable[[int, Any], None],
 ) -> None:
     """
-    :param models: the would-be members of a population of ``algorithm``
+    :param models: the would-be members of a population of ``algorithm``, which share its ``shared_settings``
+        (``same_setting``)
     :param algorithm: ``NStepSARSA`` or ``REINFORCE``
-    :param shared_settings: the attributes every member must share (``same_setting``)
     :param check_member: the algorithm's checks of one member (its index, the model), raising for what is not covered
     :raises ValueError: for no members, a model twice, a member without a seed or an env, one whose env has action
         masks (a population's stacked forward pass chooses over every action), or members of different settings (and
@@ -97,7 +111,7 @@ def check_population(
                 "to train unmasked"
             )
         check_member(k, model)
-        for setting in shared_settings:
+        for setting in shared_settings(algorithm):
             value, first = getattr(model, setting), getattr(models[0], setting)
             if not same_setting(value, first):
                 raise ValueError(

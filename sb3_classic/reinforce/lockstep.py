@@ -28,33 +28,7 @@ from sb3_classic.common.population import (
 from sb3_classic.common.stacked import StackedMLP, clip_grad_norms_per_member
 from sb3_classic.common.utils import check_positive_int
 from sb3_classic.reinforce.policies import REINFORCEPolicy
-from sb3_classic.reinforce.reinforce import REINFORCE, softmax_cdf
-
-#: What the members of a population share: every argument but ``seed`` and ``env`` (and the env's shape)
-SHARED_SETTINGS = (
-    "policy_class",
-    "policy_kwargs",
-    "learning_rate",
-    "value_learning_rate",
-    "n_episodes",
-    "update_mode",
-    "use_baseline",
-    "gamma",
-    "gamma_t_factor",
-    "normalize_advantage",
-    "ent_coef",
-    "max_grad_norm",
-    "lr_decay_factor",
-    "lr_decay_every",
-    "lr_decay_milestones",
-    "lr_decay_unit",
-    "handle_timeout_termination",
-    "max_episode_length",
-    "n_envs",
-    "observation_space",
-    "action_space",
-    "device",
-)
+from sb3_classic.reinforce.reinforce import REINFORCE, reinforce_losses, softmax_cdf
 
 
 class REINFORCEPopulation:
@@ -390,43 +364,34 @@ class _LockstepTrainer:
         subset = None if len(members) == len(self.models) else index
         obs = th.as_tensor(x, device=device)
         returns_t = th.as_tensor(returns, device=device)
-        lengths_t = th.as_tensor(lengths, device=device)
-        valid = th.arange(x.shape[1], device=device) < lengths_t[:, None]
-        # Each member's mean over its own steps: weight 1/T_k on its steps, 0 on the padding
-        weights = valid / lengths_t[:, None]
         log_probs = F.log_softmax(self.policy.stacked(obs, subset), dim=-1)
         log_prob = log_probs.gather(2, th.as_tensor(actions, device=device).unsqueeze(-1)).squeeze(-1)
         entropy = -(log_probs.exp() * log_probs).sum(-1)
         values = th.zeros_like(returns_t) if self.value is None else self.value.stacked(obs, subset).squeeze(-1)
-        # δ_t = G_t − v̂(S_t, w) (S&B §13.4), from w before this step's update; plain REINFORCE: δ_t = G_t (§13.3)
-        advantages = returns_t - values.detach()
-        policy_weights = advantages
-        if self.normalize_advantage:
-            # Standardised over each member's own batch (with torch's unbiased std), where it has more than one step
-            mean = (advantages * weights).sum(1, keepdim=True)
-            spread = ((advantages - mean) ** 2 * valid).sum(1, keepdim=True) / (lengths_t[:, None] - 1).clamp(min=1)
-            normalized = (advantages - mean) / (spread.sqrt() + 1e-8)
-            policy_weights = th.where(lengths_t[:, None] > 1, normalized, advantages)
-        if self.gamma_t_factor:
-            policy_weights = policy_weights * self.gamma ** th.as_tensor(episode_steps, device=device)
-        # θ ← θ + α^θ γ^t δ_t ∇ln π(A_t|S_t, θ) (S&B §13.4, eq. 13.11; eq. 13.8 with b = 0), each member's mean
-        policy_loss = -(policy_weights * log_prob * weights).sum(1)
-        # w ← w + α^w δ_t ∇v̂(S_t, w) (S&B §13.4): the gradient of ½ δ_t²
-        value_loss = 0.5 * ((returns_t - values) ** 2 * weights).sum(1)
-        entropy_loss = -(entropy * weights).sum(1)
-        loss = policy_loss + self.ent_coef * entropy_loss
-        if self.value is not None:
-            loss = loss + value_loss
+        member_losses = reinforce_losses(
+            log_prob,
+            entropy,
+            values,
+            returns_t,
+            th.as_tensor(episode_steps, device=device),
+            self.gamma,
+            self.gamma_t_factor,
+            self.normalize_advantage,
+            self.ent_coef,
+            self.value is not None,
+            # (one step each: no padding)
+            None if x.shape[1] == 1 else th.as_tensor(lengths, device=device),
+        )
         # A sum over members: member k's parameters get its own loss's gradient only
         parts = [self.policy] if self.value is None else [self.policy, self.value]
         for part in parts:
             part.optimizer.zero_grad()
-        loss.sum().backward()
+        member_losses.total.sum().backward()
         for part, learning_rates in zip(parts, (policy_lrs, value_lrs), strict=False):
             if self.clip:
                 clip_grad_norms_per_member(part.parameters, self.max_grad_norm)
             part.optimizer.step(members, learning_rates)
-        losses = th.stack([policy_loss, entropy_loss, value_loss]).detach().cpu().tolist()
+        losses = th.stack([member_losses.policy, member_losses.entropy, member_losses.value]).detach().cpu().tolist()
         return losses, values.detach().cpu().numpy()
 
     def close(self) -> None:
@@ -443,7 +408,7 @@ def check_members(models: Sequence[Any]) -> None:
         a setting not covered (actions other than Discrete, envs with action masks)
     :raises TypeError: for a member that is not ``REINFORCE``, or networks or optimizers not covered
     """
-    check_population(models, REINFORCE, SHARED_SETTINGS, _check_member)
+    check_population(models, REINFORCE, _check_member)
     # (raises for layers a stacked network does not hold)
     StackedMLP.from_sequentials([_policy_network(model.policy) for model in models], "π")
     if models[0].use_baseline:

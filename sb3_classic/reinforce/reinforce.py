@@ -1,5 +1,5 @@
 from collections.abc import Callable, Sequence
-from typing import Any, ClassVar, TypeVar
+from typing import Any, ClassVar, NamedTuple, TypeVar
 
 import numpy as np
 import torch as th
@@ -49,6 +49,89 @@ def categorical_inverse_cdf(logits: np.ndarray, rng: np.random.Generator) -> np.
     :return: A ~ π(·|s) of each row (``draw_from_cdf`` of ``softmax_cdf``), shape (B,), int64
     """
     return draw_from_cdf(softmax_cdf(logits), rng)
+
+
+class REINFORCELosses(NamedTuple):
+    """The losses of a REINFORCE gradient step, each member's, shape (K,)."""
+
+    policy: th.Tensor
+    value: th.Tensor
+    entropy: th.Tensor
+    #: what the gradient step descends: policy + ent_coef · entropy (+ value with a baseline)
+    total: th.Tensor
+
+
+def reinforce_losses(
+    log_prob: th.Tensor,
+    entropy: th.Tensor,
+    values: th.Tensor,
+    returns: th.Tensor,
+    episode_steps: th.Tensor,
+    gamma: float,
+    gamma_t_factor: bool,
+    normalize_advantage: bool,
+    ent_coef: float,
+    use_baseline: bool,
+    lengths: th.Tensor | None = None,
+) -> REINFORCELosses:
+    """
+    The losses of REINFORCE (with baseline) for each member of a member axis (a model alone is the axis of one member),
+    each member's mean over its own steps. The members' losses are independent: a gradient of their sum gives member
+    k's parameters the gradient of its own losses only.
+
+    :param log_prob: ln π(A_t|S_t, θ), shape (K, B), with its gradient
+    :param entropy: the entropy of π(·|S_t, θ), shape (K, B)
+    :param values: v̂(S_t, w) before the step, shape (K, B), with its gradient (zeros without a baseline)
+    :param returns: G_t, shape (K, B)
+    :param episode_steps: t, the step of each within its episode, shape (K, B)
+    :param gamma: γ
+    :param gamma_t_factor: weight each step's policy gradient by γ^t (S&B eq. 13.8)
+    :param normalize_advantage: standardise δ_t over each member's steps (where it has more than one)
+    :param ent_coef: the entropy bonus's coefficient
+    :param use_baseline: whether v̂ is trained (its loss in ``total``)
+    :param lengths: how many of the B steps are member k's, the rest padding, shape (K,); None: all B, for every member
+    :return: the losses, each shape (K,)
+    """
+    # δ_t = G_t − v̂(S_t, w) (S&B §13.4), from w before this step's update; the baseline is a constant for the policy
+    # gradient. Plain REINFORCE: δ_t = G_t (§13.3)
+    advantages = returns - values.detach()
+    if lengths is None:
+        # (with K = 1 the bits of a batch's mean-reduced losses and their gradients)
+        def member_mean(x: th.Tensor) -> th.Tensor:
+            return x.mean(dim=1)
+
+        def standardised(a: th.Tensor) -> th.Tensor:
+            return (a - a.mean(dim=1, keepdim=True)) / (a.std(dim=1, keepdim=True) + 1e-8)
+
+        several = advantages.shape[1] > 1
+    else:
+        # Each member's over its own steps: weight 1/T_k on its steps, 0 on the padding
+        valid = th.arange(advantages.shape[1], device=advantages.device) < lengths[:, None]
+        weights = valid / lengths[:, None]
+
+        def member_mean(x: th.Tensor) -> th.Tensor:
+            return (x * weights).sum(1)
+
+        def standardised(a: th.Tensor) -> th.Tensor:
+            # (torch's unbiased std; a member with one step keeps its δ_t)
+            mean = (a * weights).sum(1, keepdim=True)
+            spread = ((a - mean) ** 2 * valid).sum(1, keepdim=True) / (lengths[:, None] - 1).clamp(min=1)
+            return th.where(lengths[:, None] > 1, (a - mean) / (spread.sqrt() + 1e-8), a)
+
+        several = True
+    # Standardised over each member's own steps, where it has more than one
+    policy_weights = standardised(advantages) if normalize_advantage and several else advantages
+    if gamma_t_factor:
+        policy_weights = policy_weights * gamma**episode_steps
+    # θ ← θ + α^θ γ^t δ_t ∇ln π(A_t|S_t, θ) (S&B §13.4, eq. 13.11 with b(S_t) = v̂(S_t, w); eq. 13.8 with b = 0)
+    policy_loss = -member_mean(policy_weights * log_prob)
+    # w ← w + α^w δ_t ∇v̂(S_t, w) (S&B §13.4): the gradient of ½ δ_t²
+    value_loss = 0.5 * member_mean((returns - values) ** 2)
+    entropy_loss = -member_mean(entropy)
+    total = policy_loss + ent_coef * entropy_loss
+    if use_baseline:
+        total = total + value_loss
+    return REINFORCELosses(policy_loss, value_loss, entropy_loss, total)
 
 
 class REINFORCE(ClassicOnPolicyAlgorithm):
@@ -357,20 +440,20 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             values = th.zeros_like(returns)
         assert entropy is not None, "the action distributions REINFORCE supports have an entropy"
 
-        # δ_t = G_t − v̂(S_t, w) (S&B §13.4), from w before this step's update; the baseline is a constant for the
-        # policy gradient. Plain REINFORCE: δ_t = G_t (§13.3)
-        advantages = returns - values.detach()
-        policy_weights = advantages
-        if self.normalize_advantage and len(advantages) > 1:
-            policy_weights = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
-        if self.gamma_t_factor:
-            policy_weights = policy_weights * self.gamma**episode_steps
-        # θ ← θ + α^θ γ^t δ_t ∇ln π(A_t|S_t, θ) (S&B §13.4, eq. 13.11 with b(S_t) = v̂(S_t, w); eq. 13.8 with b = 0)
-        policy_loss = -(policy_weights * log_prob).mean()
-        # w ← w + α^w δ_t ∇v̂(S_t, w) (S&B §13.4): the gradient of ½ δ_t²
-        value_loss = 0.5 * ((returns - values) ** 2).mean()
-        entropy_loss = -entropy.mean()
-        loss = policy_loss + self.ent_coef * entropy_loss + (value_loss if self.use_baseline else 0.0)
+        # (a model alone is a member axis of one)
+        losses = reinforce_losses(
+            log_prob.unsqueeze(0),
+            entropy.unsqueeze(0),
+            values.unsqueeze(0),
+            returns.unsqueeze(0),
+            episode_steps.unsqueeze(0),
+            self.gamma,
+            self.gamma_t_factor,
+            self.normalize_advantage,
+            self.ent_coef,
+            self.use_baseline,
+        )
+        loss = losses.total.squeeze(0)
 
         # The two networks have their own parameters: one backward pass, then each optimizer's step, is the value
         # update followed by the policy update of the book's loop
@@ -386,9 +469,9 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         # can be copied (copy.deepcopy, pickle) by a callback, as A2C's can during its rollouts
         self.policy.release_distributions()
         return dict(
-            policy_loss=policy_loss.detach(),
-            value_loss=value_loss.detach(),
-            entropy_loss=entropy_loss.detach(),
+            policy_loss=losses.policy.detach().squeeze(0),
+            value_loss=losses.value.detach().squeeze(0),
+            entropy_loss=losses.entropy.detach().squeeze(0),
             values=values.detach(),
         )
 

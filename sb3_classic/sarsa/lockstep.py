@@ -5,7 +5,6 @@ from typing import Any, Literal
 
 import numpy as np
 import torch as th
-import torch.nn.functional as F
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.torch_layers import FlattenExtractor
@@ -25,41 +24,8 @@ from sb3_classic.common.population import (
 )
 from sb3_classic.common.stacked import StackedMLP, clip_grad_norms_per_member
 from sb3_classic.common.utils import check_positive_int
-from sb3_classic.sarsa.nstep_sarsa import LOG_EVERY_STEPS, NStepSARSA
+from sb3_classic.sarsa.nstep_sarsa import LOG_EVERY_STEPS, NStepSARSA, sarsa_losses
 from sb3_classic.sarsa.policies import LinearQPolicy
-
-#: What the members of a population share: every argument but ``seed`` and ``env`` (and the env's shape)
-SHARED_SETTINGS = (
-    "policy_class",
-    "policy_kwargs",
-    "learning_rate",
-    "n_steps",
-    "train_freq",
-    "gradient_steps",
-    "update_mode",
-    "gamma",
-    "expected_sarsa",
-    "td_lambda",
-    "exploration_schedule",
-    "exploration_initial_eps",
-    "exploration_final_eps",
-    "exploration_fraction",
-    "exploration_decay_rate",
-    "target_update_interval",
-    "tau",
-    "averaging_tau",
-    "loss_function",
-    "max_grad_norm",
-    "lr_decay_factor",
-    "lr_decay_every",
-    "lr_decay_milestones",
-    "lr_decay_unit",
-    "handle_timeout_termination",
-    "n_envs",
-    "observation_space",
-    "action_space",
-    "device",
-)
 
 
 class NStepSARSAPopulation:
@@ -377,19 +343,8 @@ class _LockstepTrainer:
         q_predicted = self.stacked(th.as_tensor(x, device=device)).gather(2, th.as_tensor(actions, device=device))
         q_predicted = q_predicted.squeeze(2)
         target = th.as_tensor(targets, device=device)
-        # w ← w + α [G_{t:t+n} − q̂(S_t, A_t, w)] ∇q̂(S_t, A_t, w) (S&B eq. 10.5): the gradient of ½(G − q̂)², each
-        # member's own (a sum over members: member k's parameters get its loss's gradient only)
-        if self.huber:
-            losses = F.smooth_l1_loss(q_predicted, target, reduction="none")
-        else:
-            losses = 0.5 * F.mse_loss(q_predicted, target, reduction="none")
-        if x.shape[1] == 1:
-            member_losses = losses.view(-1)
-        else:
-            # Each member's mean over its own transitions, as the mean loss of its separate run's batch
-            valid = th.as_tensor(np.arange(x.shape[1]) < sizes[:, None], device=device)
-            counts = th.as_tensor(np.maximum(sizes, 1), dtype=losses.dtype, device=device)
-            member_losses = th.where(valid, losses, 0.0).sum(dim=1) / counts
+        # (one transition each: no padding)
+        member_losses = sarsa_losses(q_predicted, target, self.huber, None if x.shape[1] == 1 else sizes)
         self.optimizer.zero_grad()
         if len(members) == len(self.models):
             member_losses.sum().backward()
@@ -413,7 +368,7 @@ def check_members(models: Sequence[Any]) -> None:
     :raises ValueError: for no members, a model twice, members of different settings, or without a seed or an env
     :raises TypeError: for a member that is not ``NStepSARSA``, or a q̂ or optimizer not covered
     """
-    check_population(models, NStepSARSA, SHARED_SETTINGS, _check_member)
+    check_population(models, NStepSARSA, _check_member)
     # (raises for layers a stacked network does not hold)
     StackedMLP.from_sequentials([model.policy.q_net.q_net for model in models])
 

@@ -46,6 +46,32 @@ class RolloutQValues(NamedTuple):
     num_timesteps: int
 
 
+def sarsa_losses(q_predicted: th.Tensor, targets: th.Tensor, huber: bool, sizes: np.ndarray | None = None) -> th.Tensor:
+    """
+    The loss of semi-gradient n-step SARSA for each member of a member axis (a model alone is the axis of one member),
+    each member's mean over its own transitions: w ← w + α [G_{t:t+n} − q̂(S_t, A_t, w)] ∇q̂(S_t, A_t, w) (S&B
+    eq. 10.5) is a gradient step on ½(G − q̂)². The members' losses are independent: a gradient of their sum gives
+    member k's parameters the gradient of its own loss only.
+
+    :param q_predicted: q̂(S_t, A_t, w) of each member's transitions, shape (K, B), with its gradient
+    :param targets: G_{t:t+n}, shape (K, B) (no gradient: semi-gradient)
+    :param huber: the Huber loss (the same as ½(G − q̂)² within 1 of the target, linear beyond) instead
+    :param sizes: how many of the B transitions are member k's, the rest padding, shape (K,) (0: a member not
+        trained, whose loss is 0); None: all B, for every member
+    :return: each member's loss, shape (K,)
+    """
+    if huber:
+        losses = F.smooth_l1_loss(q_predicted, targets, reduction="none")
+    else:
+        losses = 0.5 * F.mse_loss(q_predicted, targets, reduction="none")
+    if sizes is None:
+        # (with K = 1 the bits of the mean-reduced loss of one batch and of its gradient)
+        return losses.mean(dim=1)
+    valid = th.as_tensor(np.arange(losses.shape[1]) < sizes[:, None], device=losses.device)
+    counts = th.as_tensor(np.maximum(sizes, 1), dtype=losses.dtype, device=losses.device)
+    return th.where(valid, losses, 0.0).sum(dim=1) / counts
+
+
 # Env steps per env between two logger dumps with learn()'s default log_interval ("auto")
 LOG_EVERY_STEPS = 128
 
@@ -608,9 +634,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         index = th.as_tensor(actions, device=self.device).reshape(-1, 1)
         q_predicted = self.policy.q_net(obs_as_tensor(observations, self.device)).gather(1, index).flatten()
         target = th.as_tensor(targets, device=self.device)
-        # w ← w + α [G_{t:t+n} − q̂(S_t, A_t, w)] ∇q̂(S_t, A_t, w) (S&B eq. 10.5): the gradient of ½(G − q̂)²
-        huber = self.loss_function == "huber"
-        loss = F.smooth_l1_loss(q_predicted, target) if huber else 0.5 * F.mse_loss(q_predicted, target)
+        # (a model alone is a member axis of one)
+        loss = sarsa_losses(q_predicted.unsqueeze(0), target.unsqueeze(0), self.loss_function == "huber").squeeze(0)
         self.policy.optimizer.zero_grad()
         loss.backward()
         self._clip_gradients(self.policy.q_net.parameters())
