@@ -335,8 +335,9 @@ class LinearQPolicy(SARSAPolicy):
         W_a \leftarrow W_a + \alpha [G - \hat q(S_t, A_t, \mathbf w)]\, \mathbf x(S_t):
 
     ``sgd_step`` applies it to the weights without autograd, the same arithmetic as autograd's gradient of
-    :math:`\tfrac12 (G - \hat q)^2` and ``torch.optim.SGD``'s step (the same weights to the last bit for one
-    transition), at a fraction of the cost: the book's per-step loop makes this update at every env step.
+    :math:`\tfrac12 (G - \hat q)^2` and ``torch.optim.SGD``'s step (the same weights to float32 rounding: the two
+    may order their products differently), at a fraction of the cost: the book's per-step loop makes this update at
+    every env step.
     Over ``TileCoding`` on the CPU, q̂ and the update go over the active tiles as the book's ``tiles3`` code does (S&B
     §9.5.4): :math:`\hat q(s, a) = \sum_i W[a, i(s)]` over the active tiles :math:`i(s)`, and
     :math:`\alpha [G - \hat q]` added to each active tile's weight, without the dense :math:`\mathbf x(s)`: the same
@@ -544,7 +545,7 @@ class LinearQPolicy(SARSAPolicy):
             # ∂½(G − q̂)²/∂q̂ = q̂ − G: the gradient of W_a is (q̂ − G) x(S_t), of b_a (q̂ − G); SGD adds −α × the mean gradient
             error = q_predicted - th.as_tensor(targets, device=features.device)
             if len(error) == 1:
-                # One transition: the row A_t alone (the arithmetic of autograd's step, to the last bit)
+                # One transition: the row A_t alone (the arithmetic of autograd's step)
                 action = int(actions[0])
                 if layer.weight.requires_grad:
                     layer.weight[action].add_(features[0] * error, alpha=-learning_rate)
