@@ -190,12 +190,13 @@ def main(argv: Sequence[str] | None = None) -> None:
     import pandas as pd
 
     versions = code_versions("nstep_sarsa")
+    command = " ".join(["python -m benchmarks.threads", shlex.join(argv if argv is not None else sys.argv[1:])]).strip()
     page = f"""# PyTorch threads on the CPU
 
 Produced by:
 
 ```
-python -m benchmarks.threads
+{command}
 ```
 
 Each command timed whole (start-up included) {args.repeats} times in turn with each number of threads, on this
