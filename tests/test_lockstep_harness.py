@@ -79,8 +79,9 @@ def test_a_member_stopped_by_its_env_fails_alone(monkeypatch: pytest.MonkeyPatch
             log_interval: Any = "auto",
             tb_log_name: str = "NStepSARSA",
             reset_num_timesteps: bool = True,
+            use_masking: bool = True,
         ) -> Any:
-            super().learn(total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps)
+            super().learn(total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps, use_masking)
             raise MemberError("member 1 (seed 1) stopped", {1: ValueError("the env returned NaN")})
 
     monkeypatch.setattr(runner, "population_class", lambda algo: StoppedSecond)

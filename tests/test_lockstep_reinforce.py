@@ -7,10 +7,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
-from sb3_contrib.common.wrappers import ActionMasker
 from stable_baselines3.common.callbacks import CheckpointCallback, StopTrainingOnMaxEpisodes
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.envs import FakeImageEnv, SimpleMultiObsEnv
+from stable_baselines3.common.envs import FakeImageEnv, IdentityEnv, SimpleMultiObsEnv
 from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_classic import REINFORCE
@@ -202,19 +201,6 @@ def test_the_inverse_cdf_draws_the_softmax_probabilities() -> None:
     assert abs(actions.mean() - 0.75) < 0.02
 
 
-def masked_env(seed: int) -> VecEnv:
-    def valid_actions(env: gym.Env) -> np.ndarray:
-        return np.ones(2, dtype=bool)
-
-    return make_vec_env(
-        "CartPole-v1",
-        n_envs=1,
-        seed=seed,
-        wrapper_class=ActionMasker,  # type: ignore[arg-type]
-        wrapper_kwargs=dict(action_mask_fn=valid_actions),
-    )
-
-
 @pytest.mark.parametrize(
     ("make", "message"),
     [
@@ -222,7 +208,7 @@ def masked_env(seed: int) -> VecEnv:
         (lambda: [make_member(0), make_member(1, update_mode="per_step")], "member 1's update_mode='per_step' differs"),
         (lambda: [REINFORCE("MlpPolicy", "CartPole-v1", **SETTING)], "seed=None"),
         (lambda: [REINFORCE("MlpPolicy", "Pendulum-v1", seed=0)], r"Box.*Discrete actions"),
-        (lambda: [make_member(0, masked_env(0))], "action_masks"),
+        (lambda: [REINFORCE("MlpPolicy", IdentityEnv(4), seed=0)], r"observation_space=Discrete\(4\).*one-hot"),
         (lambda: [REINFORCE("CnnPolicy", FakeImageEnv(discrete=True), seed=0)], "NatureCNN"),
         (lambda: [REINFORCE("MultiInputPolicy", SimpleMultiObsEnv(), seed=0)], "CombinedExtractor"),
         (
@@ -235,7 +221,7 @@ def masked_env(seed: int) -> VecEnv:
         ),
         (lambda: [make_member(0, policy_kwargs=dict(net_arch=[32], activation_fn=th.nn.PReLU))], "PReLU"),
     ],
-    ids=["n-episodes", "update-mode", "no-seed", "box", "masking", "cnn", "dict", "sgd", "weight-decay", "prelu"],
+    ids=["n-episodes", "update-mode", "no-seed", "box", "discrete-obs", "cnn", "dict", "sgd", "weight-decay", "prelu"],
 )
 def test_settings_not_covered_are_refused(make: Any, message: str) -> None:
     with pytest.raises((ValueError, TypeError), match=message):

@@ -20,6 +20,8 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_classic import REINFORCE, NStepSARSA
 from sb3_classic.common.returns import masked_epsilon_greedy_expectation
+from sb3_classic.reinforce import REINFORCEPopulation
+from sb3_classic.sarsa import NStepSARSAPopulation
 
 
 class RefuseIllegalActions(gym.Wrapper):
@@ -390,3 +392,42 @@ def test_stored_masks_stay_with_their_steps_when_rows_are_dropped_and_the_buffer
     first = round(float(data.observations[0, 0, 0]) * 10)
     assert first == 4  # (four rows dropped)
     np.testing.assert_array_equal(data.action_masks, np.stack(added[first:]))
+
+
+@pytest.mark.parametrize(
+    ("algo", "kwargs"),
+    [
+        (NStepSARSA, dict(expected_sarsa=True, update_mode="per_step", train_freq=1, gradient_steps=1)),
+        (NStepSARSA, dict(train_freq=4, gradient_steps=2)),
+        (REINFORCE, dict(ent_coef=0.01)),
+        (REINFORCE, dict(update_mode="per_step", use_baseline=False)),
+    ],
+    ids=["sarsa-per-step", "sarsa-batch", "reinforce", "reinforce-per-step"],
+)
+def test_a_population_member_chooses_legal_actions_as_its_separate_run(algo: Any, kwargs: dict[str, Any]) -> None:
+    # Each member reads its own env's masks at each of its steps: no illegal action reaches an env (the env raises),
+    # and a member draws and trains as its separate run drawing from the member's generator. The stacked layers'
+    # batched products may round differently from nn.Linear's in the last bits: close, not equal
+    def legal_actions(env: Any) -> np.ndarray:
+        # (CartPole's observations are Box, as a population's stacked networks take: pushing outwards is illegal)
+        return np.array([env.unwrapped.state[0] < 0.05, env.unwrapped.state[0] > -0.05])
+
+    def make(seed: int) -> Any:
+        env = make_vec_env(lambda: RefuseIllegalActions(ActionMasker(gym.make("CartPole-v1"), legal_actions)), 2, seed)
+        return algo("MlpPolicy", env, seed=seed, policy_kwargs=dict(net_arch=[16]), **kwargs)
+
+    separate = []
+    for seed in (0, 1):
+        model = make(seed)
+        model._action_rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(0,)))
+        separate.append(model.learn(200))
+    members = [make(seed) for seed in (0, 1)]
+    population = NStepSARSAPopulation if algo is NStepSARSA else REINFORCEPopulation
+    population(members).learn(200)
+    for member, model in zip(members, separate, strict=True):
+        assert member._use_masking
+        assert member.rollout_buffer.action_masks is not None
+        assert member._n_updates == model._n_updates > 0
+        seed = member.seed
+        for p, q in zip(member.policy.parameters(), model.policy.parameters(), strict=True):
+            th.testing.assert_close(p, q, atol=1e-5, rtol=1e-4, msg=lambda m, seed=seed: f"seed {seed}: {m}")  # type: ignore[misc]

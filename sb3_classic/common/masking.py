@@ -94,13 +94,14 @@ def check_some_action_legal(masks: np.ndarray, action_space: spaces.Space, episo
         )
 
 
-def uniform_legal_actions(action_masks: np.ndarray) -> np.ndarray:
+def uniform_legal_actions(action_masks: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
     """
     :param action_masks: the legal actions of each row, shape (batch, n_actions), each row with at least one
-    :return: an action drawn uniformly from each row's legal ones, shape (batch,), int64 (NumPy's global RNG, as
-        the unmasked draw: with every action legal, the same draws)
+    :param rng: the generator to draw from; None: NumPy's global one, as the unmasked draw (with every action legal,
+        the same draws)
+    :return: an action drawn uniformly from each row's legal ones, shape (batch,), int64
     """
     n_legal = np.count_nonzero(action_masks, axis=1)
     # The k-th legal action of each row, k uniform in 0, …, |L(s)| − 1
-    k = np.random.randint(0, n_legal, size=len(action_masks))
+    k = np.random.randint(0, n_legal, size=len(action_masks)) if rng is None else rng.integers(0, n_legal)
     return (np.cumsum(action_masks, axis=1) > k[:, None]).argmax(axis=1)

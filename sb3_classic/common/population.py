@@ -10,14 +10,14 @@ from typing import Any, cast
 
 import numpy as np
 import torch as th
+from gymnasium import spaces
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.type_aliases import MaybeCallback
 from torch import nn
 
 from sb3_classic.common.arguments import constructor_parameters
-from sb3_classic.common.masking import is_masking_supported
-from sb3_classic.common.stacked import StackedAdam, StackedMLP
+from sb3_classic.common.stacked import StackedAdam, StackedMLP, parametrized_layers
 from sb3_classic.common.threads import one_thread_unless_chosen
 
 #: The remaining progress at which two schedules are compared (``same_setting``)
@@ -84,10 +84,10 @@ def check_population(
         (``same_setting``)
     :param algorithm: ``NStepSARSA`` or ``REINFORCE``
     :param check_member: the algorithm's checks of one member (its index, the model), raising for what is not covered
-    :raises ValueError: for no members, a model twice, a member without a seed or an env, one whose env has action
-        masks (a population's stacked forward pass chooses over every action), or members of different settings (and
+    :raises ValueError: for no members, a model twice, a member without a seed or an env, or members of different
+        settings (and what ``check_member`` raises)
+    :raises TypeError: for a member that is not an ``algorithm`` model, or one of observations other than Box (and
         what ``check_member`` raises)
-    :raises TypeError: for a member that is not an ``algorithm`` model (and what ``check_member`` raises)
     """
     name = algorithm.__name__
     if len(models) == 0:
@@ -104,13 +104,13 @@ def check_population(
             raise ValueError(
                 f"member {k} (seed {model.seed}) has no env to train on: build it with one, or call model.set_env(env) first"
             )
-        if is_masking_supported(model.env):
-            raise ValueError(
-                f"member {k} (seed {model.seed}): its env has action_masks(), and a population trains without masks: "
-                "train masked models one after the other (model.learn), or pass envs without the masks (no ActionMasker) "
-                "to train unmasked"
-            )
         check_member(k, model)
+        if not isinstance(model.observation_space, spaces.Box):
+            raise TypeError(
+                f"member {k} (seed {model.seed}): observation_space={model.observation_space}: a population's stacked "
+                "networks take flat Box observations; train this setting one model after the other (model.learn), or "
+                "wrap the env to give Box observations (e.g. a one-hot of a Discrete observation)"
+            )
         for setting in shared_settings(algorithm):
             value, first = getattr(model, setting), getattr(models[0], setting)
             if not same_setting(value, first):
@@ -165,10 +165,12 @@ def start_learn(
 
 
 @contextmanager
-def trained_together(population: str, models: Sequence[Any], rngs: Sequence[np.random.Generator]) -> Iterator[None]:
+def trained_together(
+    population: str, models: Sequence[Any], rngs: Sequence[np.random.Generator], use_masking: bool
+) -> Iterator[None]:
     """
-    While a population trains its members: each draws its behaviour policy's actions from its own generator, reads no
-    action masks (the population's check refused envs with them), and refuses ``save`` (``refusing_save``); PyTorch
+    While a population trains its members: each draws its behaviour policy's actions from its own generator, reads its
+    env's action masks as its ``learn(use_masking=...)`` would, and refuses ``save`` (``refusing_save``); PyTorch
     uses one thread on the CPU unless the user chose a number (``one_thread_unless_chosen``: the stacked networks are
     small too, and threads made a population slower than its members one after another on a busy machine); as before
     when the context ends, however it ends.
@@ -176,10 +178,11 @@ def trained_together(population: str, models: Sequence[Any], rngs: Sequence[np.r
     :param population: the population's class name, for the messages
     :param models: the members
     :param rngs: their generators (``member_rng``)
+    :param use_masking: the population's ``learn``'s
     """
     for model, rng in zip(models, rngs, strict=True):
         model._action_rng = rng
-        model._setup_masking(False)
+        model._setup_masking(use_masking)
         # A member's optimizers are not stepped while the population trains it (the StackedAdams are): a file saved
         # now would hold a stale Adam state, so saving waits until learn returns
         model.__dict__["save"] = refusing_save(population)
@@ -250,19 +253,13 @@ def finish_learn(
         ) from errors[first]
 
 
-def linear_parameters(network: nn.Sequential) -> list[th.Tensor]:
-    """:return: the weights and biases of the network's ``nn.Linear`` layers, in order (a stacked MLP's order)"""
-    parameters: list[th.Tensor] = []
-    for layer in network:
-        if isinstance(layer, nn.Linear):
-            parameters.append(layer.weight)
-            if layer.bias is not None:
-                parameters.append(layer.bias)
-    return parameters
+def layer_parameters(network: nn.Sequential) -> list[th.Tensor]:
+    """:return: the parameters of the network's ``nn.Linear`` and ``nn.LayerNorm`` layers, in a stacked MLP's order"""
+    return [parameter for layer in parametrized_layers(network) for parameter in layer.parameters()]
 
 
 def _to_member(stacked_slice: th.Tensor, parameter: th.Tensor) -> th.Tensor:
-    # (K, in, out)[k] is the transposed (out, in) weight of nn.Linear; (K, 1, out)[k] the (out,) bias
+    # (K, in, out)[k] is the transposed (out, in) weight of nn.Linear; (K, 1, out)[k] a bias or LayerNorm gain, (out,)
     return stacked_slice.T if parameter.dim() == 2 else stacked_slice[0]
 
 
@@ -276,7 +273,8 @@ class StackedPart:
     the stacked ones), and, for a trained network, its ``StackedAdam`` loaded from the members' optimizers (each
     member's step count and moments) and handed back to them by ``close``.
 
-    :param networks: the members' networks, ``nn.Sequential`` of their ``nn.Linear`` layers and activations
+    :param networks: the members' networks, ``nn.Sequential`` of their ``nn.Linear`` and ``nn.LayerNorm`` layers and
+        activations
     :param optimizers: the members' Adam optimizers of those parameters; None: a network no optimizer trains (a copy of
         q̂), without gradients
     :param name: the network's name in the errors
@@ -293,7 +291,7 @@ class StackedPart:
         self.stacked.share_with(networks)
         self.parameters = list(self.stacked.parameters())
         # Member k's own parameters, in the stacked parameters' order
-        self.member_parameters = [linear_parameters(network) for network in networks]
+        self.member_parameters = [layer_parameters(network) for network in networks]
         self._optimizer: StackedAdam | None = None
         if optimizers is None:
             self.stacked.requires_grad_(False)

@@ -10,6 +10,7 @@ from collections.abc import Sequence
 
 import numpy as np
 import torch as th
+import torch.nn.functional as F
 from torch import nn
 from torch.optim.adam import adam
 
@@ -74,35 +75,77 @@ class StackedLinear(nn.Module):
         return th.baddbmm(bias, x, weight)
 
     def share_with(self, linears: Sequence[nn.Linear]) -> None:
-        """
-        Make each member's parameters views into the stacked ones (shared storage, the same ``Parameter`` objects): a
-        forward pass of a member's own network, its ``state_dict`` and its polyak copies read the stacked weights as
-        they are, with no copying.
-
-        :param linears: the members' layers, in member order
-        """
+        """:param linears: the members' layers, in member order: their parameters become views of the stacked ones"""
         for member, linear in enumerate(linears):
             linear.weight.data = self.weight.data[member].T
             if linear.bias is not None and self.bias is not None:
                 linear.bias.data = self.bias.data[member, 0]
 
-    @staticmethod
-    def own_storage(linears: Sequence[nn.Linear]) -> None:
-        """
-        Give each member's parameters storage of their own again (a contiguous copy of what they hold now), so that the
-        stacked module can go and a saved member holds its own weights only.
 
-        :param linears: the members' layers
+class StackedLayerNorm(nn.Module):
+    """
+    K layer normalisations (Ba, Kiros & Hinton 2016; torch's ``nn.LayerNorm`` over the last dimension) as one module:
+    each member's features normalised on their own, then its own gain and bias, ``weight`` and ``bias`` of shape
+    (K, 1, features) (None where the members' layers have none).
+
+    :param weight: the members' gains, shape (K, 1, features), or None
+    :param bias: their biases, shape (K, 1, features), or None
+    :param eps: the members' ``eps``
+    """
+
+    def __init__(self, weight: th.Tensor | None, bias: th.Tensor | None, eps: float) -> None:
+        super().__init__()
+        self.weight = None if weight is None else nn.Parameter(weight)
+        self.bias = None if bias is None else nn.Parameter(bias)
+        self.eps = eps
+
+    @classmethod
+    def from_layer_norms(cls, norms: Sequence[nn.LayerNorm]) -> "StackedLayerNorm":
         """
-        for linear in linears:
-            for parameter in linear.parameters():
-                parameter.data = parameter.data.clone(memory_format=th.contiguous_format)
+        :param norms: the members' layers, of one shape, each over the last dimension only
+        :return: a stacked layer holding copies of their gains and biases
+        :raises TypeError: for a normalisation over more than the last dimension
+        """
+        first = norms[0]
+        if len(first.normalized_shape) != 1:
+            raise TypeError(
+                f"{first!r} normalises over {len(first.normalized_shape)} dimensions: a stacked network normalises each "
+                "member's features, the last dimension only"
+            )
+        with th.no_grad():
+            weight = None if first.weight is None else th.stack([norm.weight for norm in norms]).unsqueeze(1)
+            bias = None if first.bias is None else th.stack([norm.bias for norm in norms]).unsqueeze(1)
+        return cls(weight, bias, first.eps)
+
+    def forward(self, x: th.Tensor, members: th.Tensor | None = None) -> th.Tensor:
+        """
+        :param x: the members' features, shape (K, B, features), or (M, B, features) for the M ``members``
+        :param members: the members whose layers to apply, shape (M,), int64; None: all K
+        :return: each member's (x − mean) / √(var + eps) · gain + bias, over its own features, same shape as x
+        """
+        y = F.layer_norm(x, x.shape[-1:], None, None, self.eps)
+        weight: th.Tensor | None = self.weight
+        bias: th.Tensor | None = self.bias
+        if members is not None:
+            weight = None if weight is None else weight.index_select(0, members)
+            bias = None if bias is None else bias.index_select(0, members)
+        if weight is not None:
+            y = y * weight
+        return y if bias is None else y + bias
+
+    def share_with(self, norms: Sequence[nn.LayerNorm]) -> None:
+        """:param norms: the members' layers, in member order: their gains and biases become views of the stacked ones"""
+        for member, norm in enumerate(norms):
+            if norm.weight is not None and self.weight is not None:
+                norm.weight.data = self.weight.data[member, 0]
+            if norm.bias is not None and self.bias is not None:
+                norm.bias.data = self.bias.data[member, 0]
 
 
 class StackedMLP(nn.Module):
     """
     K multilayer perceptrons of one shape (the same layer sizes and activations, weights per member) as one module:
-    ``StackedLinear`` layers and the members' elementwise activations.
+    ``StackedLinear`` and ``StackedLayerNorm`` layers and the members' elementwise activations.
 
     :param layers: the stacked layers and the activations between them, in order
     """
@@ -114,8 +157,8 @@ class StackedMLP(nn.Module):
     @classmethod
     def from_sequentials(cls, networks: Sequence[nn.Sequential], name: str = "q̂") -> "StackedMLP":
         """
-        :param networks: the members' MLPs: ``nn.Linear`` layers and elementwise activations without parameters
-            (``ELEMENTWISE_ACTIVATIONS``), of the same sizes and activations
+        :param networks: the members' MLPs: ``nn.Linear`` and ``nn.LayerNorm`` layers and elementwise activations
+            without parameters (``ELEMENTWISE_ACTIVATIONS``), of the same sizes and activations
         :param name: the networks' name in the errors
         :return: the stacked MLP holding copies of their weights (``share_with`` makes the members' parameters views of
             them)
@@ -134,34 +177,42 @@ class StackedMLP(nn.Module):
                     )
             if isinstance(layer, nn.Linear):
                 layers.append(StackedLinear.from_linears(column))  # type: ignore[arg-type]
+            elif isinstance(layer, nn.LayerNorm):
+                layers.append(StackedLayerNorm.from_layer_norms(column))  # type: ignore[arg-type]
             elif isinstance(layer, ELEMENTWISE_ACTIVATIONS) and next(layer.parameters(), None) is None:
                 layers.append(layer)
             else:
                 raise TypeError(
-                    f"layer {index} of {name} is a {type(layer).__name__}: a stacked network holds linear layers and "
-                    f"elementwise activations ({', '.join(kind.__name__ for kind in ELEMENTWISE_ACTIVATIONS)}). Train "
-                    "these members one after the other (model.learn)"
+                    f"layer {index} of {name} is a {type(layer).__name__}: a stacked network holds linear layers, "
+                    "LayerNorm and elementwise activations "
+                    f"({', '.join(kind.__name__ for kind in ELEMENTWISE_ACTIVATIONS)}). Train these members one after the "
+                    "other (model.learn)"
                 )
         return cls(layers)
 
-    @property
-    def linears(self) -> list[StackedLinear]:
-        """The stacked linear layers, in order."""
-        return [layer for layer in self.layers if isinstance(layer, StackedLinear)]
-
     def share_with(self, networks: Sequence[nn.Sequential]) -> None:
         """
-        :param networks: the members' MLPs: their parameters become views into the stacked ones
-            (``StackedLinear.share_with``)
+        Make each member's parameters views into the stacked ones (shared storage, the same ``Parameter`` objects): a
+        forward pass of a member's own network, its ``state_dict`` and its polyak copies read the stacked weights as
+        they are, with no copying.
+
+        :param networks: the members' MLPs, in member order
         """
-        for index, stacked in enumerate(self.linears):
-            stacked.share_with([_linears(network)[index] for network in networks])
+        stacked = [layer for layer in self.layers if isinstance(layer, StackedLinear | StackedLayerNorm)]
+        for index, layer in enumerate(stacked):
+            layer.share_with([parametrized_layers(network)[index] for network in networks])  # type: ignore[misc]
 
     @staticmethod
     def own_storage(networks: Sequence[nn.Sequential]) -> None:
-        """:param networks: the members' MLPs: their parameters get storage of their own again"""
+        """
+        Give each member's parameters storage of their own again (a contiguous copy of what they hold now), so that the
+        stacked module can go and a saved member holds its own weights only.
+
+        :param networks: the members' MLPs
+        """
         for network in networks:
-            StackedLinear.own_storage(_linears(network))
+            for parameter in network.parameters():
+                parameter.data = parameter.data.clone(memory_format=th.contiguous_format)
 
     def forward(self, x: th.Tensor, members: th.Tensor | None = None) -> th.Tensor:
         """
@@ -174,7 +225,7 @@ class StackedMLP(nn.Module):
         :return: every member's outputs (each of ``members``'), shape (K or M, B, out_features)
         """
         for layer in self.layers:
-            x = layer.forward(x, members) if isinstance(layer, StackedLinear) else layer.forward(x)
+            x = layer.forward(x, members) if isinstance(layer, StackedLinear | StackedLayerNorm) else layer.forward(x)
         return x
 
     @th.no_grad()
@@ -187,8 +238,9 @@ class StackedMLP(nn.Module):
         return self.forward(x)
 
 
-def _linears(network: nn.Sequential) -> list[nn.Linear]:
-    return [layer for layer in network if isinstance(layer, nn.Linear)]
+def parametrized_layers(network: nn.Sequential) -> list[nn.Linear | nn.LayerNorm]:
+    """:return: the network's layers with parameters, ``nn.Linear`` and ``nn.LayerNorm``, in order (a stacked MLP's)"""
+    return [layer for layer in network if isinstance(layer, nn.Linear | nn.LayerNorm)]
 
 
 def clip_grad_norms_per_member(parameters: Sequence[th.Tensor], max_norm: float) -> th.Tensor:

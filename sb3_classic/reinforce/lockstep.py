@@ -20,7 +20,7 @@ from sb3_classic.common.population import (
     check_population,
     dump,
     finish_learn,
-    linear_parameters,
+    layer_parameters,
     member_rng,
     start_learn,
     trained_together,
@@ -29,6 +29,9 @@ from sb3_classic.common.stacked import StackedMLP, clip_grad_norms_per_member
 from sb3_classic.common.utils import check_positive_int
 from sb3_classic.reinforce.policies import REINFORCEPolicy
 from sb3_classic.reinforce.reinforce import REINFORCE, reinforce_losses, softmax_cdf
+
+#: An illegal action's logit in sb3-contrib's ``MaskableCategorical``
+MASKED_LOGIT = -1e8
 
 
 class REINFORCEPopulation:
@@ -71,8 +74,8 @@ class REINFORCEPopulation:
     Covered: both update modes, ``use_baseline`` True and False, ``n_episodes``, ``normalize_advantage``,
     ``gamma_t_factor``, ``ent_coef``, ``max_grad_norm``, schedules and decays, several envs per member, Discrete
     actions, ``"MlpPolicy"`` (linear layers and elementwise activations) over flat Box observations, and
-    ``torch.optim.Adam`` without weight decay, AMSGrad or ``maximize``. Members train without action masks: an env
-    with masks is refused, as is anything else not covered, with a ``ValueError``/``TypeError`` that names it.
+    ``torch.optim.Adam`` without weight decay, AMSGrad or ``maximize``, and envs with action masks (each member's own).
+    Anything else not covered is refused with a ``ValueError``/``TypeError`` that names it.
 
     :param models: the members, ``REINFORCE`` models of one setting (every argument but ``seed`` and ``env``), each
         with its own seed (not None) and env
@@ -93,6 +96,7 @@ class REINFORCEPopulation:
         log_interval: int | None = 4,
         tb_log_name: str = "REINFORCE",
         reset_num_timesteps: bool = True,
+        use_masking: bool = True,
     ) -> list[REINFORCE]:
         """
         Train every member for at least ``total_timesteps`` env steps (its envs together; its last update waits for
@@ -103,6 +107,8 @@ class REINFORCEPopulation:
         :param log_interval: ``REINFORCE.learn``'s (updates between two logger dumps), for every member's logger
         :param tb_log_name: the name of each member's run for TensorBoard logging
         :param reset_num_timesteps: ``REINFORCE.learn``'s, for every member
+        :param use_masking: ``REINFORCE.learn``'s: each member whose env has action masks (``action_masks()``, as
+            sb3-contrib's ``ActionMasker`` gives) draws among its legal actions and trains on their distribution
         :return: the members, trained
         :raises ValueError: if a member's env returned NaN or ±inf (the member's usual error, with the member named):
             that member stops as its last update left it, the others train to the end first
@@ -113,13 +119,13 @@ class REINFORCEPopulation:
         totals, member_callbacks = start_learn(models, callback, total_timesteps, reset_num_timesteps, tb_log_name)
 
         run = _LockstepRun(models, member_callbacks, totals, log_interval)
-        with trained_together("REINFORCEPopulation", models, self.action_rngs):
+        with trained_together("REINFORCEPopulation", models, self.action_rngs, use_masking):
             try:
                 run.run()
             finally:
                 run.trainer.close()
                 for model in models:
-                    model._next_cdf = None
+                    model._next_logits = model._next_cdf = None
         finish_learn("REINFORCEPopulation", models, member_callbacks, run.iterations, run.errors, log_interval)
         return models
 
@@ -156,9 +162,10 @@ class _LockstepRun:
             if not stepping and not self.updates:
                 return
             if stepping:
-                cdf = softmax_cdf(self.trainer.logits())
+                logits = self.trainer.logits()
+                cdf = softmax_cdf(logits)
                 for k in stepping:
-                    self._step(k, cdf[k])
+                    self._step(k, logits[k], cdf[k])
             for k in self.trainer.step(self.updates):
                 self.updates.pop(k).finish(self.models[k])
                 dump(self.models[k], self.iterations[k], self.log_interval)
@@ -173,16 +180,17 @@ class _LockstepRun:
                 stepping.append(k)
         return stepping
 
-    def _step(self, k: int, cdf: np.ndarray) -> None:
+    def _step(self, k: int, logits: np.ndarray, cdf: np.ndarray) -> None:
         """
         Member k's env step, and the end of its rollout and the start of its update when the rollout is complete
         (``REINFORCE.learn``'s loop after ``collect_rollouts``).
 
         :param k: the member
-        :param cdf: its cumulative probabilities (``softmax_cdf``), shape (n_envs, n_actions)
+        :param logits: its logits h(S, ·, θ), shape (n_envs, n_actions)
+        :param cdf: their cumulative probabilities (``softmax_cdf``), the same shape
         """
         model = self.models[k]
-        model._next_cdf = cdf
+        model._next_logits, model._next_cdf = logits, cdf
         try:
             complete = self.rollouts[k].step()
         except ValueError as error:
@@ -190,7 +198,7 @@ class _LockstepRun:
             self.stopped.add(k)
             return
         finally:
-            model._next_cdf = None
+            model._next_logits = model._next_cdf = None
         if complete is None:  # (the callback stopped training)
             self.stopped.add(k)
             return
@@ -222,6 +230,9 @@ class _MemberUpdate:
         self.actions = np.asarray(batch.actions).reshape(length)
         self.returns = np.asarray(batch.targets, dtype=np.float32)
         self.episode_steps = np.asarray(batch.episode_steps)
+        #: the legal actions at each step, shape (length, n_actions), where masks make some action illegal
+        masks = batch.action_masks
+        self.action_masks = None if masks is None or masks.all() else np.asarray(masks, dtype=bool).reshape(length, -1)
         #: the chunks of steps, one per gradient step (``_update_slices``), and the next one
         self.chunks = [(0, length)] if model.update_mode == "batch" else [(t, t + 1) for t in range(length)]
         self.next = 0
@@ -275,6 +286,7 @@ class _LockstepTrainer:
             )
         first = models[0]
         self.features = int(np.prod(first.observation_space.shape or (1,)))
+        self.n_actions = int(first.action_space.n)  # type: ignore[attr-defined]
         self.max_grad_norm = first.max_grad_norm
         self.clip = self.max_grad_norm is not None and bool(np.isfinite(self.max_grad_norm))
         self.gamma, self.gamma_t_factor = first.gamma, first.gamma_t_factor
@@ -310,8 +322,13 @@ class _LockstepTrainer:
         actions = np.zeros((n_members, width), dtype=np.int64)
         returns = np.zeros((n_members, width), dtype=np.float32)
         episode_steps = np.zeros((n_members, width), dtype=np.int64)
+        masked = [updates[k].action_masks is not None for k in members]
+        # (every action legal where no member's chunk has masks, and in the padding)
+        masks = np.ones((n_members, width, self.n_actions), dtype=bool) if any(masked) else None
         for row, (k, (start, stop)) in enumerate(zip(members, chunks, strict=True)):
             update, n = updates[k], stop - start
+            if masks is not None and update.action_masks is not None:
+                masks[row, :n] = update.action_masks[start:stop]
             x[row, :n] = update.observations[start:stop]
             actions[row, :n] = update.actions[start:stop]
             returns[row, :n] = update.returns[start:stop]
@@ -321,7 +338,7 @@ class _LockstepTrainer:
         for k in members:
             policy_lrs[k], value_lrs[k] = updates[k].policy_lr, updates[k].value_lr
         losses, values = self._gradient_step(
-            x, actions, returns, episode_steps, lengths, np.array(members), policy_lrs, value_lrs
+            x, actions, returns, episode_steps, lengths, np.array(members), policy_lrs, value_lrs, masks
         )
         finished = []
         for row, k in enumerate(members):
@@ -343,6 +360,7 @@ class _LockstepTrainer:
         members: np.ndarray,
         policy_lrs: np.ndarray,
         value_lrs: np.ndarray,
+        action_masks: np.ndarray | None,
     ) -> tuple[list[list[float]], np.ndarray]:
         """
         One gradient step of each network of the given members, each on the mean over its own chunk of steps
@@ -356,6 +374,7 @@ class _LockstepTrainer:
         :param members: the members, shape (M,), ascending
         :param policy_lrs: every member's α^θ, shape (K,)
         :param value_lrs: every member's α^w, shape (K,)
+        :param action_masks: the legal actions at each step, shape (M, B, n_actions); None: every action legal
         :return: each member's policy, entropy and value losses (three lists of M), and v̂(S_t) before the step
             (zeros without a baseline), shape (M, B)
         """
@@ -364,9 +383,16 @@ class _LockstepTrainer:
         subset = None if len(members) == len(self.models) else index
         obs = th.as_tensor(x, device=device)
         returns_t = th.as_tensor(returns, device=device)
-        log_probs = F.log_softmax(self.policy.stacked(obs, subset), dim=-1)
+        logits = self.policy.stacked(obs, subset)
+        masks = None if action_masks is None else th.as_tensor(action_masks, device=device)
+        if masks is not None:
+            # sb3-contrib's MaskableCategorical: an illegal action's logit at -1e8, its probability 0
+            logits = th.where(masks, logits, MASKED_LOGIT)
+        log_probs = F.log_softmax(logits, dim=-1)
         log_prob = log_probs.gather(2, th.as_tensor(actions, device=device).unsqueeze(-1)).squeeze(-1)
-        entropy = -(log_probs.exp() * log_probs).sum(-1)
+        p_log_p = log_probs.exp() * log_probs
+        # (an illegal action adds nothing to the entropy, as in MaskableCategorical)
+        entropy = -(p_log_p if masks is None else th.where(masks, p_log_p, 0.0)).sum(-1)
         values = th.zeros_like(returns_t) if self.value is None else self.value.stacked(obs, subset).squeeze(-1)
         member_losses = reinforce_losses(
             log_prob,
@@ -405,7 +431,7 @@ def check_members(models: Sequence[Any]) -> None:
     """
     :param models: the would-be members of a population
     :raises ValueError: for no members, a model twice, members of different settings, without a seed or an env, or of
-        a setting not covered (actions other than Discrete, envs with action masks)
+        a setting not covered (actions other than Discrete)
     :raises TypeError: for a member that is not ``REINFORCE``, or networks or optimizers not covered
     """
     check_population(models, REINFORCE, _check_member)
@@ -453,7 +479,7 @@ def _check_member(k: int, model: REINFORCE) -> None:
                 "Adam without weight decay, AMSGrad or maximize (StackedAdam); leave optimizer_class and those kwargs out"
             )
         trained = {id(parameter) for group in optimizer.param_groups for parameter in group["params"]}
-        stacked = {id(parameter) for parameter in linear_parameters(networks[key])}
+        stacked = {id(parameter) for parameter in layer_parameters(networks[key])}
         if len(optimizer.param_groups) != 1 or trained != stacked:
             raise TypeError(
                 f"{name}: policy.{key} trains other parameters than its network's linear layers (a features extractor "

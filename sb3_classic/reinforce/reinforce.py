@@ -298,9 +298,10 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         self.ent_coef = ent_coef
         # The generator of the rollouts' action draws; None: torch's global one (``multinomial``), seeded by SB3
         self._action_rng: np.random.Generator | None = None
-        # π's cumulative probabilities (softmax_cdf) of the current observations computed outside the model (from a
-        # population's stacked forward pass, reinforce/lockstep.py), taken by the next _sample_actions in place of a
-        # forward pass of its own
+        # π's logits of the current observations and their cumulative probabilities (softmax_cdf) computed outside the
+        # model (from a population's stacked forward pass, reinforce/lockstep.py), taken by the next _sample_actions in
+        # place of a forward pass of its own
+        self._next_logits: np.ndarray | None = None
         self._next_cdf: np.ndarray | None = None
         if _init_setup_model:
             self._setup_model()  # (which checks the arguments first)
@@ -346,29 +347,29 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
     def _draw_actions(self, obs: np.ndarray | dict[str, np.ndarray], action_masks: np.ndarray | None) -> np.ndarray:
         """
         ``_sample_actions`` with ``_action_rng`` set: A ~ π(·|S, θ) by the inverse CDF of the soft-max of the logits
-        (``categorical_inverse_cdf``), one uniform draw of ``_action_rng`` per env. The cumulative probabilities are
-        those the population computed (``_next_cdf``, taken once) or those of the policy's forward pass.
+        (``categorical_inverse_cdf``), one uniform draw of ``_action_rng`` per env, an illegal action (masks) at
+        probability 0. The logits and their cumulative probabilities are those the population computed
+        (``_next_logits``, ``_next_cdf``, taken once) or those of the policy's forward pass.
 
         :param obs: the current observations of all envs
-        :param action_masks: must be None or allow every action (the draw is over all actions)
+        :param action_masks: the legal actions of each env, shape (n_envs, n_actions); None: all legal
         :return: one action index per env, shape (n_envs,)
-        :raises ValueError: for actions other than Discrete, a policy with its own forward or distribution, or masks
-            that make an action illegal
+        :raises ValueError: for actions other than Discrete, or a policy with its own forward or distribution
         """
         if not isinstance(self.action_space, spaces.Discrete) or self.policy._own_forward or not self.policy._sb3_distribution:
             raise ValueError(
                 f"_action_rng draws Discrete actions from the soft-max of REINFORCEPolicy's logits, not {self.action_space} "
                 f"actions of a {type(self.policy).__name__}: set model._action_rng = None"
             )
+        logits, cdf = self._next_logits, self._next_cdf
+        self._next_logits = self._next_cdf = None
+        if logits is None:
+            logits = self.policy.action_logits(obs_as_tensor(obs, self.device)).cpu().numpy()
         if action_masks is not None and not action_masks.all():
-            raise ValueError(
-                "_action_rng draws over all actions, without masks: set model._action_rng = None, or learn(use_masking=False)"
-            )
-        cdf = self._next_cdf
-        if cdf is None:
-            cdf = softmax_cdf(self.policy.action_logits(obs_as_tensor(obs, self.device)).cpu().numpy())
-        else:
-            self._next_cdf = None
+            # h(s, a) = −∞ for an illegal a: e^{h} = 0 in the soft-max (S&B eq. 13.2)
+            cdf = softmax_cdf(np.where(action_masks, logits, -np.inf))
+        elif cdf is None:
+            cdf = softmax_cdf(logits)
         assert self._action_rng is not None
         return draw_from_cdf(cdf, self._action_rng)
 
@@ -612,7 +613,7 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
 
     def _excluded_save_params(self) -> list[str]:
         # A population's generator and probabilities (they are the population's): not training state
-        return [*super()._excluded_save_params(), "_action_rng", "_next_cdf"]
+        return [*super()._excluded_save_params(), "_action_rng", "_next_cdf", "_next_logits"]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         optimizers = ["policy.optimizer"] + (["policy.value_optimizer"] if self.use_baseline else [])

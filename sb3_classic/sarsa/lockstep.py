@@ -64,10 +64,10 @@ class NStepSARSAPopulation:
     Covered: both ``update_mode`` values with any ``train_freq``, ``gradient_steps`` and ``n_steps`` (the batch mode of
     the tuned settings included), ``loss_function``, ``expected_sarsa``, ``td_lambda``, the copies of q̂
     (``target_update_interval``, ``tau``, ``averaging_tau``), schedules and decays, several envs per member;
-    ``"MlpPolicy"`` (linear layers and elementwise activations) over flat Box observations, and ``torch.optim.Adam``
-    without weight decay, AMSGrad or ``maximize``. Anything else (``"LinearPolicy"``, LayerNorm, CNN or Dict
-    observations, another optimizer, an env with action masks) is refused with a ``ValueError``/``TypeError`` that
-    names it.
+    ``"MlpPolicy"`` (linear layers, LayerNorm and elementwise activations) over flat Box observations, envs with
+    action masks (each member's own, read at each of its steps), and ``torch.optim.Adam`` without weight decay,
+    AMSGrad or ``maximize``. Anything else (``"LinearPolicy"``, CNN or Dict observations, another optimizer) is refused
+    with a ``ValueError``/``TypeError`` that names it.
 
     :param models: the members, ``NStepSARSA`` models of one setting (every argument but ``seed`` and ``env``), each
         with its own seed (not None) and env
@@ -88,6 +88,7 @@ class NStepSARSAPopulation:
         log_interval: int | Literal["auto"] | None = "auto",
         tb_log_name: str = "NStepSARSA",
         reset_num_timesteps: bool = True,
+        use_masking: bool = True,
     ) -> list[NStepSARSA]:
         """
         Train every member for ``total_timesteps`` env steps (its envs together), as ``NStepSARSA.learn`` would.
@@ -97,6 +98,8 @@ class NStepSARSAPopulation:
         :param log_interval: ``NStepSARSA.learn``'s, for every member's logger
         :param tb_log_name: the name of each member's run for TensorBoard logging
         :param reset_num_timesteps: ``NStepSARSA.learn``'s, for every member
+        :param use_masking: ``NStepSARSA.learn``'s: each member whose env has action masks (``action_masks()``, as
+            sb3-contrib's ``ActionMasker`` gives) chooses among its legal actions
         :return: the members, trained
         :raises ValueError: if a member's env returned NaN or ±inf (the member's usual error, with the member named):
             that member stops as its last update left it, the others train to the end first
@@ -112,7 +115,7 @@ class NStepSARSAPopulation:
         stopped: set[int] = set()
         iterations = [0] * len(models)
         trainer = _LockstepTrainer(models)
-        with trained_together("NStepSARSAPopulation", models, self.action_rngs):
+        with trained_together("NStepSARSAPopulation", models, self.action_rngs, use_masking):
             try:
                 self._train(trainer, member_callbacks, totals, iterations, errors, stopped, log_interval)
             finally:

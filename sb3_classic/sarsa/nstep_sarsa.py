@@ -367,7 +367,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         if not explore.any():
             return greedy_actions
         if action_masks is not None:
-            return np.where(explore, first_action + uniform_legal_actions(action_masks), greedy_actions)
+            return np.where(explore, first_action + uniform_legal_actions(action_masks, rng), greedy_actions)
         uniform = np.random.randint(first_action, stop, size=shape) if rng is None else rng.integers(first_action, stop, shape)
         return np.where(explore, uniform, greedy_actions)
 
@@ -378,15 +378,24 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             # A subclass's greedy policy (action masking, say), as SB3's DQN's ε-greedy takes its policy's predict
             greedy = self.policy._predict(obs_as_tensor(obs, self.device), deterministic=False)
             return self._epsilon_greedy(greedy.cpu().numpy().reshape(-1))
+        q_values = self._behaviour_q_values(obs)
+        return self._epsilon_greedy(greedy_random_ties(q_values, self._action_rng))
+
+    def _behaviour_q_values(self, obs: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
+        """
+        :param obs: the current observations of all envs
+        :return: q̂(S, ·) of them, shape (n_envs, n_actions): those a population computed for this step
+            (``_next_q_values``, taken once), else q̂'s forward pass; kept in the per-step mode for the bootstrap of the
+            next update, if no update comes in between (see ``_values_at``)
+        """
         q_values = self._next_q_values
         if q_values is None:
             q_values = self.policy.q_values(obs)
         else:
             self._next_q_values = None
         if self.update_mode == "per_step":
-            # Kept for the bootstrap of the next update, if no update comes in between (see _values_at)
             self._rollout_q_values = RolloutQValues(q_values, self._n_updates, self.num_timesteps)
-        return self._epsilon_greedy(greedy_random_ties(q_values, self._action_rng))
+        return q_values
 
     def _sample_masked_actions(self, obs: np.ndarray | dict[str, np.ndarray], action_masks: np.ndarray) -> np.ndarray:
         """
@@ -397,11 +406,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         :param action_masks: their legal actions, shape (n_envs, n_actions)
         :return: one action index per env
         """
-        q_values = self.policy.q_values(obs)
-        if self.update_mode == "per_step":
-            self._rollout_q_values = RolloutQValues(q_values, self._n_updates, self.num_timesteps)
         # argmax over the legal actions: the illegal ones at −∞
-        greedy = greedy_random_ties(np.where(action_masks, q_values, -np.inf))
+        greedy = greedy_random_ties(np.where(action_masks, self._behaviour_q_values(obs), -np.inf), self._action_rng)
         return self._epsilon_greedy(greedy, action_masks=action_masks)
 
     def _rollout_complete(self, n_steps: int, n_episodes: int) -> bool:
