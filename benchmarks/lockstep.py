@@ -113,11 +113,10 @@ def population_of(models: list[Any]) -> REINFORCEPopulation | NStepSARSAPopulati
 #: The stacked calls of the populations: their forward passes for the members' actions (REINFORCE's with the softmax
 #: of its logits) and their gradient steps
 STACKED_CALLS: tuple[tuple[Any, str], ...] = (
-    (sarsa_lockstep._LockstepTrainer, "q_values"),
-    (sarsa_lockstep._LockstepTrainer, "step"),
-    (reinforce_lockstep._LockstepTrainer, "logits"),
-    (reinforce_lockstep, "softmax_cdf"),
-    (reinforce_lockstep._LockstepTrainer, "step"),
+    (sarsa_lockstep._StackedQ, "forward"),
+    (sarsa_lockstep._StackedQ, "step"),
+    (reinforce_lockstep._StackedPolicy, "forward"),
+    (reinforce_lockstep._StackedPolicy, "step"),
 )
 #: What ``floor`` clocks: the stacked calls and the members' envs
 CLOCKED: tuple[tuple[Any, str], ...] = (*STACKED_CALLS, (DummyVecEnv, "step_wait"))

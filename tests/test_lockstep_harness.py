@@ -77,7 +77,7 @@ def test_a_member_stopped_by_its_env_fails_alone(monkeypatch: pytest.MonkeyPatch
             total_timesteps: int,
             callback: Any = None,
             log_interval: Any = "auto",
-            tb_log_name: str = "NStepSARSA",
+            tb_log_name: str | None = None,
             reset_num_timesteps: bool = True,
             use_masking: bool = True,
         ) -> Any:

@@ -6,7 +6,7 @@ member stacked with its Adam state (``StackedPart``), and the end of ``learn`` f
 
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any, cast
+from typing import Any, Generic, Literal, Protocol, TypeVar, cast
 
 import numpy as np
 import torch as th
@@ -17,8 +17,10 @@ from stable_baselines3.common.type_aliases import MaybeCallback
 from torch import nn
 
 from sb3_classic.common.arguments import constructor_parameters
+from sb3_classic.common.buffers import TrainingBatch
 from sb3_classic.common.stacked import StackedAdam, StackedMLP, parametrized_layers
 from sb3_classic.common.threads import one_thread_unless_chosen
+from sb3_classic.common.utils import check_positive_int
 
 #: The remaining progress at which two schedules are compared (``same_setting``)
 SCHEDULE_PROBES = (1.0, 0.75, 0.5, 0.25, 0.0)
@@ -345,7 +347,7 @@ class MemberRollout:
     """
     A member's rollout loop (``ClassicOnPolicyAlgorithm.collect_rollouts``), one env step at a time, so that a
     population can choose every member's actions from one stacked forward pass (the caller hands the member its slice,
-    ``_next_q_values`` or ``_next_cdf``, before each step): the member's own ``_start_rollout`` and ``_rollout_step``
+    ``Trainer.hand``, before each step): the member's own ``_start_rollout`` and ``_rollout_step``
     (its behaviour policy's draws, its env and Monitor, ``num_timesteps``, its callback's ``on_step``, the checks for NaN
     and ±inf, the buffer, the episode counts), and the rollout's end as ``collect_rollouts`` ends it.
 
@@ -389,3 +391,190 @@ class MemberRollout:
         callback.on_rollout_end()
         self.running = False
         return True
+
+
+class Trainer(Protocol):
+    """
+    An algorithm's stacked networks during one ``learn`` of its population (``NStepSARSAPopulation``'s q̂ and its
+    copies, ``REINFORCEPopulation``'s π and v̂): what the population's loop (``Lockstep``) asks of them.
+    """
+
+    #: Whether a member whose rollout has nothing to train yet takes its next env step before the next stacked
+    #: gradient step (NStepSARSA: the first n − 1 steps of an episode; REINFORCE, whose rollouts are whole episodes:
+    #: one env step per stacked step)
+    steps_again: bool
+
+    def forward(self) -> Any:
+        """:return: what chooses every member's actions at this env step (one stacked forward pass)"""
+
+    def hand(self, model: Any, outputs: Any, k: int) -> None:
+        """Give member ``k`` its part of ``forward``'s ``outputs`` for its next env step (None: take it back)."""
+
+    def start(self, model: Any, batch: TrainingBatch) -> Any:
+        """:return: the member's update of ``batch`` (its ``_start_update``'s), to train one stacked step at a time"""
+
+    def step(self, updates: dict[int, Any]) -> list[int]:
+        """One stacked gradient step of the members with an update in progress; :return: those it finished"""
+
+    def finish(self, model: Any, update: Any) -> None:
+        """The end of a member's update (its ``_finish_update``)."""
+
+    def close(self) -> None:
+        """Hand each member its own parameters and optimizer states back."""
+
+
+#: The algorithm of a population's members
+ModelT = TypeVar("ModelT", bound=BaseAlgorithm)
+
+
+class Population(Generic[ModelT]):
+    """
+    K models of one algorithm and setting, each with its own seed and env, trained in lockstep: the ``learn`` of
+    ``NStepSARSAPopulation`` and ``REINFORCEPopulation``, which say what their members share (their stacked networks,
+    ``_trainer``) and what they cover (``_check``).
+
+    :param models: the members, models of one setting (every argument but ``seed`` and ``env``), each with its own
+        seed (not None) and env
+    :raises ValueError: for members of different settings, without a seed or an env, or of a setting not covered
+    :raises TypeError: for networks or optimizers not covered
+    """
+
+    def __init__(self, models: Sequence[ModelT]) -> None:
+        self._check(models)
+        self.models = list(models)
+        #: each member's generator of its behaviour policy's draws
+        self.action_rngs = [member_rng(model.seed) for model in self.models]
+
+    def _check(self, models: Sequence[Any]) -> None:
+        """:raises ValueError, TypeError: for members the population does not cover (its module's ``check_members``)"""
+        raise NotImplementedError
+
+    def _trainer(self) -> Trainer:
+        """:return: the members' stacked networks for one ``learn``, sharing the members' weights until ``close``"""
+        raise NotImplementedError
+
+    def _log_interval(self) -> int:
+        """:return: ``log_interval="auto"``: the updates between two logger dumps of the algorithm's ``learn``"""
+        raise NotImplementedError
+
+    def learn(
+        self,
+        total_timesteps: int,
+        callback: Sequence[MaybeCallback] | None = None,
+        log_interval: int | Literal["auto"] | None = "auto",
+        tb_log_name: str | None = None,
+        reset_num_timesteps: bool = True,
+        use_masking: bool = True,
+    ) -> list[ModelT]:
+        """
+        Train every member for ``total_timesteps`` env steps (its envs together), as its algorithm's ``learn`` would
+        (REINFORCE's last update waits for its episodes to end).
+
+        :param total_timesteps: env steps per member
+        :param callback: one callback (or None, or a list of them) per member, in member order; None: none
+        :param log_interval: the updates between two dumps of each member's logger, as the algorithm's ``learn``;
+            ``"auto"``: its default (NStepSARSA's about every 1,000 env steps, REINFORCE's 4); None: no dumps
+        :param tb_log_name: the name of each member's run for TensorBoard logging (default: the algorithm's name)
+        :param reset_num_timesteps: the algorithm's ``learn``'s, for every member
+        :param use_masking: the algorithm's ``learn``'s: each member whose env has action masks (``action_masks()``,
+            as sb3-contrib's ``ActionMasker`` gives) chooses among its legal actions
+        :return: the members, trained
+        :raises MemberError: if a member's env returned NaN or ±inf (the member's usual error, with the member named):
+            that member stops as its last update left it, the others train to the end first
+        """
+        models, name = self.models, type(self).__name__
+        if log_interval == "auto":
+            log_interval = self._log_interval()
+        if log_interval is not None:
+            hint = 'Pass the updates between two logger dumps, "auto" or None'
+            check_positive_int("log_interval", log_interval, hint=hint)
+        tb_log_name = type(models[0]).__name__ if tb_log_name is None else tb_log_name
+        totals, member_callbacks = start_learn(models, callback, total_timesteps, reset_num_timesteps, tb_log_name)
+        run = Lockstep(models, member_callbacks, totals, log_interval, self._trainer())
+        with trained_together(name, models, self.action_rngs, use_masking):
+            try:
+                run.run()
+            finally:
+                run.trainer.close()
+        finish_learn(name, models, member_callbacks, run.iterations, run.errors, log_interval)
+        return models
+
+
+class Lockstep:
+    """
+    The loop of one population's ``learn``: at each tick, the members free to step take their env steps (each
+    member's actions from one stacked forward pass of all of them, ``Trainer.forward``), a member whose rollout is
+    complete starts its update, and one stacked gradient step trains every member with an update in progress. A
+    member's update trains its transitions one stacked step at a time while the others go on with their env steps and
+    updates: each member makes the updates of its separate run, in the same order.
+
+    :param models: the members
+    :param callbacks: their callbacks (``_setup_learn``'s)
+    :param totals: their ``total_timesteps`` (``_setup_learn``'s)
+    :param log_interval: ``learn``'s
+    :param trainer: their stacked networks
+    """
+
+    def __init__(
+        self, models: list[Any], callbacks: list[BaseCallback], totals: list[int], log_interval: int | None, trainer: Trainer
+    ) -> None:
+        self.models, self.totals, self.log_interval, self.trainer = models, totals, log_interval, trainer
+        self.errors: dict[int, ValueError] = {}
+        self.stopped: set[int] = set()
+        #: each member's rollouts so far (``time/iterations``)
+        self.iterations = [0] * len(models)
+        self.rollouts = [MemberRollout(model, callback) for model, callback in zip(models, callbacks, strict=True)]
+        #: the updates in progress, by member
+        self.updates: dict[int, Any] = {}
+
+    def run(self) -> None:
+        """Train until every member has taken its env steps (or stopped)."""
+        while True:
+            stepping = [
+                k
+                for k, model in enumerate(self.models)
+                if k not in self.stopped
+                and k not in self.updates
+                and (self.rollouts[k].running or model.num_timesteps < self.totals[k])
+            ]
+            if not stepping and not self.updates:
+                return
+            while stepping:
+                outputs = self.trainer.forward()
+                stepping = [k for k in stepping if self._step(k, outputs)]
+            for k in self.trainer.step(self.updates):
+                self.trainer.finish(self.models[k], self.updates.pop(k))
+                dump(self.models[k], self.iterations[k], self.log_interval)
+
+    def _step(self, k: int, outputs: Any) -> bool:
+        """
+        Member k's env step, and the end of its rollout and the start of its update when the rollout is complete (the
+        algorithm's ``learn`` loop after ``collect_rollouts``).
+
+        :param k: the member
+        :param outputs: ``Trainer.forward``'s
+        :return: whether it takes another env step before the next stacked gradient step (``Trainer.steps_again``)
+        """
+        model = self.models[k]
+        self.trainer.hand(model, outputs, k)
+        try:
+            complete = self.rollouts[k].step()
+        except ValueError as error:
+            self.errors[k] = error
+            self.stopped.add(k)
+            return False
+        finally:
+            self.trainer.hand(model, None, k)
+        if complete is None:  # (the callback stopped training)
+            self.stopped.add(k)
+            return False
+        if not complete:
+            return self.trainer.steps_again
+        self.iterations[k] += 1
+        model._update_current_progress_remaining(model.num_timesteps, self.totals[k])
+        batch = model._start_update()
+        if batch is not None:
+            self.updates[k] = self.trainer.start(model, batch)
+            return False
+        dump(model, self.iterations[k], self.log_interval)
+        return self.trainer.steps_again and model.num_timesteps < self.totals[k]

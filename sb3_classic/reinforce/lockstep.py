@@ -7,26 +7,13 @@ import numpy as np
 import torch as th
 import torch.nn.functional as F
 from gymnasium import spaces
-from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.torch_layers import FlattenExtractor
-from stable_baselines3.common.type_aliases import MaybeCallback
 from torch import nn
 
 from sb3_classic.common.buffers import TrainingBatch
-from sb3_classic.common.population import (
-    MemberRollout,
-    StackedPart,
-    check_population,
-    dump,
-    finish_learn,
-    layer_parameters,
-    member_rng,
-    start_learn,
-    trained_together,
-)
+from sb3_classic.common.population import Population, StackedPart, check_population, layer_parameters
 from sb3_classic.common.stacked import StackedMLP, clip_grad_norms_per_member
-from sb3_classic.common.utils import check_positive_int
 from sb3_classic.reinforce.policies import REINFORCEPolicy
 from sb3_classic.reinforce.reinforce import REINFORCE, reinforce_losses, softmax_cdf
 
@@ -34,7 +21,7 @@ from sb3_classic.reinforce.reinforce import REINFORCE, reinforce_losses, softmax
 MASKED_LOGIT = -1e8
 
 
-class REINFORCEPopulation:
+class REINFORCEPopulation(Population[REINFORCE]):
     """
     K ``REINFORCE`` models of one setting (REINFORCE with baseline, Sutton & Barto §13.4, or plain REINFORCE, §13.3),
     each built as usual with its own seed and env, trained in lockstep: each member steps its own env, with its own
@@ -83,137 +70,17 @@ class REINFORCEPopulation:
     :raises TypeError: for networks or optimizers not covered
     """
 
-    def __init__(self, models: Sequence[REINFORCE]) -> None:
+    def _check(self, models: Sequence[Any]) -> None:
         check_members(models)
-        self.models = list(models)
-        #: each member's generator of its action draws
-        self.action_rngs = [member_rng(model.seed) for model in self.models]
 
-    def learn(
-        self,
-        total_timesteps: int,
-        callback: Sequence[MaybeCallback] | None = None,
-        log_interval: int | None = 4,
-        tb_log_name: str = "REINFORCE",
-        reset_num_timesteps: bool = True,
-        use_masking: bool = True,
-    ) -> list[REINFORCE]:
-        """
-        Train every member for at least ``total_timesteps`` env steps (its envs together; its last update waits for
-        its episodes to end), as ``REINFORCE.learn`` would.
+    def _trainer(self) -> "_StackedPolicy":
+        return _StackedPolicy(self.models)
 
-        :param total_timesteps: env steps per member
-        :param callback: one callback (or None, or a list of them) per member, in member order; None: none
-        :param log_interval: ``REINFORCE.learn``'s (updates between two logger dumps), for every member's logger
-        :param tb_log_name: the name of each member's run for TensorBoard logging
-        :param reset_num_timesteps: ``REINFORCE.learn``'s, for every member
-        :param use_masking: ``REINFORCE.learn``'s: each member whose env has action masks (``action_masks()``, as
-            sb3-contrib's ``ActionMasker`` gives) draws among its legal actions and trains on their distribution
-        :return: the members, trained
-        :raises ValueError: if a member's env returned NaN or ±inf (the member's usual error, with the member named):
-            that member stops as its last update left it, the others train to the end first
-        """
-        models = self.models
-        if log_interval is not None:
-            check_positive_int("log_interval", log_interval, hint="Pass the updates between two logger dumps, or None")
-        totals, member_callbacks = start_learn(models, callback, total_timesteps, reset_num_timesteps, tb_log_name)
-
-        run = _LockstepRun(models, member_callbacks, totals, log_interval)
-        with trained_together("REINFORCEPopulation", models, self.action_rngs, use_masking):
-            try:
-                run.run()
-            finally:
-                run.trainer.close()
-                for model in models:
-                    model._next_logits = model._next_cdf = None
-        finish_learn("REINFORCEPopulation", models, member_callbacks, run.iterations, run.errors, log_interval)
-        return models
+    def _log_interval(self) -> int:
+        return 4  # (REINFORCE.learn's default)
 
 
-class _LockstepRun:
-    """
-    The loop of one ``learn`` call: at each tick, every member not updating takes an env step of its rollout (its
-    actions from one stacked forward pass), a member whose rollout is complete starts its update, and one stacked
-    gradient step trains every member with an update in progress.
-
-    :param models: the members
-    :param callbacks: their callbacks (``_setup_learn``'s)
-    :param totals: their ``total_timesteps`` (``_setup_learn``'s)
-    :param log_interval: ``learn``'s
-    """
-
-    def __init__(
-        self, models: list[REINFORCE], callbacks: list[BaseCallback], totals: list[int], log_interval: int | None
-    ) -> None:
-        self.models, self.callbacks, self.totals, self.log_interval = models, callbacks, totals, log_interval
-        self.errors: dict[int, ValueError] = {}
-        self.stopped: set[int] = set()
-        #: each member's rollouts so far (``time/iterations``)
-        self.iterations = [0] * len(models)
-        #: each member's rollout loop
-        self.rollouts = [MemberRollout(model, callback) for model, callback in zip(models, callbacks, strict=True)]
-        self.updates: dict[int, _MemberUpdate] = {}
-        self.trainer = _LockstepTrainer(models)
-
-    def run(self) -> None:
-        """Train until every member has taken its env steps (or stopped)."""
-        while True:
-            stepping = self._stepping()
-            if not stepping and not self.updates:
-                return
-            if stepping:
-                logits = self.trainer.logits()
-                cdf = softmax_cdf(logits)
-                for k in stepping:
-                    self._step(k, logits[k], cdf[k])
-            for k in self.trainer.step(self.updates):
-                self.updates.pop(k).finish(self.models[k])
-                dump(self.models[k], self.iterations[k], self.log_interval)
-
-    def _stepping(self) -> list[int]:
-        """:return: the members that take an env step now: not stopped, not updating, with a rollout open or to open"""
-        stepping = []
-        for k, model in enumerate(self.models):
-            if k in self.stopped or k in self.updates:
-                continue
-            if self.rollouts[k].running or model.num_timesteps < self.totals[k]:
-                stepping.append(k)
-        return stepping
-
-    def _step(self, k: int, logits: np.ndarray, cdf: np.ndarray) -> None:
-        """
-        Member k's env step, and the end of its rollout and the start of its update when the rollout is complete
-        (``REINFORCE.learn``'s loop after ``collect_rollouts``).
-
-        :param k: the member
-        :param logits: its logits h(S, ·, θ), shape (n_envs, n_actions)
-        :param cdf: their cumulative probabilities (``softmax_cdf``), the same shape
-        """
-        model = self.models[k]
-        model._next_logits, model._next_cdf = logits, cdf
-        try:
-            complete = self.rollouts[k].step()
-        except ValueError as error:
-            self.errors[k] = error
-            self.stopped.add(k)
-            return
-        finally:
-            model._next_logits = model._next_cdf = None
-        if complete is None:  # (the callback stopped training)
-            self.stopped.add(k)
-            return
-        if not complete:
-            return
-        self.iterations[k] += 1
-        model._update_current_progress_remaining(model.num_timesteps, self.totals[k])
-        batch = model._start_update()
-        if batch is None:
-            dump(model, self.iterations[k], self.log_interval)
-        else:
-            self.updates[k] = _MemberUpdate(model, batch)
-
-
-class _MemberUpdate:
+class _REINFORCEUpdate:
     """
     A member's update in progress: its steps (``REINFORCE._start_update``'s batch), trained one chunk per stacked
     gradient step (all of them at once in the batch mode, one at a time in the per-step mode), and what
@@ -261,13 +128,16 @@ def _value_network(policy: REINFORCEPolicy) -> nn.Sequential:
     return nn.Sequential(*policy.mlp_extractor.value_net, policy.value_net)
 
 
-class _LockstepTrainer:
+class _StackedPolicy:
     """
-    The stacked networks of the members of one ``learn`` call: built from their weights, shared with them while they
-    live, handed back by ``close``.
+    The stacked networks of the members of one ``learn`` call (the population's ``Trainer``): built from their
+    weights, shared with them while they live, handed back by ``close``.
 
     :param models: the members
     """
+
+    #: One env step per stacked gradient step: a rollout is whole episodes, which the other members' updates wait for
+    steps_again = False
 
     def __init__(self, models: list[REINFORCE]) -> None:
         self.models = models
@@ -295,15 +165,31 @@ class _LockstepTrainer:
         #: every member's current observations, flattened, refilled at each env step (one array, no stacking)
         self._observations = np.zeros((len(models), first.n_envs, self.features), dtype=np.float32)
 
-    def logits(self) -> np.ndarray:
-        """:return: h(S, ·, θ) of every member's current observations, one stacked forward pass, (K, n_envs, n_actions)"""
+    def forward(self) -> tuple[np.ndarray, np.ndarray]:
+        """
+        :return: h(S, ·, θ) of every member's current observations, one stacked forward pass, shape
+            (K, n_envs, n_actions), and the cumulative probabilities of their soft-max (``softmax_cdf``), the same shape
+        """
         observations = self._observations
         for k, model in enumerate(self.models):
             observations[k] = np.reshape(model._last_obs, observations.shape[1:])  # type: ignore[arg-type]
         with th.no_grad():
-            return self.policy.stacked(th.as_tensor(observations, device=self.device)).cpu().numpy()
+            logits = self.policy.stacked(th.as_tensor(observations, device=self.device)).cpu().numpy()
+        return logits, softmax_cdf(logits)
 
-    def step(self, updates: dict[int, _MemberUpdate]) -> list[int]:
+    def hand(self, model: REINFORCE, outputs: tuple[np.ndarray, np.ndarray] | None, k: int) -> None:
+        """Member k's logits and their soft-max for its next draw, in place of a forward pass of its own (None: none)."""
+        model._next_logits, model._next_cdf = (None, None) if outputs is None else (outputs[0][k], outputs[1][k])
+
+    def start(self, model: REINFORCE, batch: TrainingBatch) -> _REINFORCEUpdate:
+        """:return: the update of ``batch``: one gradient step of its whole batch, or one per step in time order"""
+        return _REINFORCEUpdate(model, batch)
+
+    def finish(self, model: REINFORCE, update: _REINFORCEUpdate) -> None:
+        """The member's ``_finish_update``, with the update's losses and values."""
+        update.finish(model)
+
+    def step(self, updates: dict[int, _REINFORCEUpdate]) -> list[int]:
         """
         One stacked gradient step of each network: every member with an update in progress takes the gradient step
         of its next chunk (``REINFORCE.train``: its whole batch, or its next step in time order); the others are not

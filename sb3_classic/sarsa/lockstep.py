@@ -1,34 +1,22 @@
 """K ``NStepSARSA`` models of one setting, each with its own seed and env, trained in lockstep on one stacked q̂."""
 
 from collections.abc import Sequence
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import torch as th
-from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.torch_layers import FlattenExtractor
-from stable_baselines3.common.type_aliases import MaybeCallback
 from stable_baselines3.dqn.policies import QNetwork
 
 from sb3_classic.common.buffers import TrainingBatch
-from sb3_classic.common.population import (
-    MemberRollout,
-    StackedPart,
-    check_population,
-    dump,
-    finish_learn,
-    member_rng,
-    start_learn,
-    trained_together,
-)
+from sb3_classic.common.population import Population, StackedPart, check_population
 from sb3_classic.common.stacked import StackedMLP, clip_grad_norms_per_member
-from sb3_classic.common.utils import check_positive_int
 from sb3_classic.sarsa.nstep_sarsa import LOG_EVERY_STEPS, NStepSARSA, sarsa_losses
 from sb3_classic.sarsa.policies import LinearQPolicy
 
 
-class NStepSARSAPopulation:
+class NStepSARSAPopulation(Population[NStepSARSA]):
     """
     K ``NStepSARSA`` models of one setting (episodic semi-gradient n-step SARSA, Sutton & Barto §10.2), each built as
     usual with its own seed and env, trained in lockstep: each member steps its own env with its own ε, schedules,
@@ -75,146 +63,18 @@ class NStepSARSAPopulation:
     :raises TypeError: for a q̂ or optimizer not covered
     """
 
-    def __init__(self, models: Sequence[NStepSARSA]) -> None:
+    def _check(self, models: Sequence[Any]) -> None:
         check_members(models)
-        self.models = list(models)
-        #: each member's generator of its behaviour policy's draws
-        self.action_rngs = [member_rng(model.seed) for model in self.models]
 
-    def learn(
-        self,
-        total_timesteps: int,
-        callback: Sequence[MaybeCallback] | None = None,
-        log_interval: int | Literal["auto"] | None = "auto",
-        tb_log_name: str = "NStepSARSA",
-        reset_num_timesteps: bool = True,
-        use_masking: bool = True,
-    ) -> list[NStepSARSA]:
-        """
-        Train every member for ``total_timesteps`` env steps (its envs together), as ``NStepSARSA.learn`` would.
+    def _trainer(self) -> "_StackedQ":
+        return _StackedQ(self.models)
 
-        :param total_timesteps: env steps per member
-        :param callback: one callback (or None, or a list of them) per member, in member order; None: none
-        :param log_interval: ``NStepSARSA.learn``'s, for every member's logger
-        :param tb_log_name: the name of each member's run for TensorBoard logging
-        :param reset_num_timesteps: ``NStepSARSA.learn``'s, for every member
-        :param use_masking: ``NStepSARSA.learn``'s: each member whose env has action masks (``action_masks()``, as
-            sb3-contrib's ``ActionMasker`` gives) chooses among its legal actions
-        :return: the members, trained
-        :raises ValueError: if a member's env returned NaN or ±inf (the member's usual error, with the member named):
-            that member stops as its last update left it, the others train to the end first
-        """
-        models = self.models
-        if log_interval == "auto":
-            log_interval = -(-LOG_EVERY_STEPS // models[0].train_freq)
-        if log_interval is not None:
-            check_positive_int("log_interval", log_interval, hint='Pass the updates between two logger dumps, "auto" or None')
-        totals, member_callbacks = start_learn(models, callback, total_timesteps, reset_num_timesteps, tb_log_name)
-
-        errors: dict[int, ValueError] = {}
-        stopped: set[int] = set()
-        iterations = [0] * len(models)
-        trainer = _LockstepTrainer(models)
-        with trained_together("NStepSARSAPopulation", models, self.action_rngs, use_masking):
-            try:
-                self._train(trainer, member_callbacks, totals, iterations, errors, stopped, log_interval)
-            finally:
-                trainer.close()
-        finish_learn("NStepSARSAPopulation", models, member_callbacks, iterations, errors, log_interval)
-        return models
-
-    def _train(
-        self,
-        trainer: "_LockstepTrainer",
-        member_callbacks: list[BaseCallback],
-        totals: list[int],
-        iterations: list[int],
-        errors: dict[int, ValueError],
-        stopped: set[int],
-        log_interval: int | None,
-    ) -> None:
-        """The members' env steps and stacked gradient steps until every member has trained to its total, or stopped."""
-        models = self.models
-        # A member's update trains its transitions one stacked step at a time, while the others go on with their
-        # env steps and updates: each member makes the updates of its separate run in the same order. Between two
-        # stacked steps, every member without an update in progress takes env steps (one stacked forward pass
-        # for all of them per env step) until its next update has something to train: at an episode's start a
-        # member takes its first n - 1 steps without waiting for the others' gradient steps, as its weights do not
-        # change before its next update
-        updates: dict[int, _MemberUpdate] = {}
-        rollouts = [MemberRollout(model, member_callbacks[k]) for k, model in enumerate(models)]
-        while True:
-            ready = [
-                k
-                for k, model in enumerate(models)
-                if k not in stopped and k not in updates and (rollouts[k].running or model.num_timesteps < totals[k])
-            ]
-            if not ready and not updates:
-                break
-            _env_steps(ready, rollouts, trainer, updates, totals, iterations, errors, stopped, log_interval)
-            for k in trainer.step(updates):
-                update = updates.pop(k)
-                models[k]._finish_update(update.batch, update.n_chunks, update.q_first, update.losses)
-                dump(models[k], iterations[k], log_interval)
+    def _log_interval(self) -> int:
+        # (NStepSARSA.learn's "auto": a dump about every LOG_EVERY_STEPS env steps per env)
+        return -(-LOG_EVERY_STEPS // self.models[0].train_freq)
 
 
-def _env_steps(
-    ready: list[int],
-    rollouts: list[MemberRollout],
-    trainer: "_LockstepTrainer",
-    updates: dict[int, "_MemberUpdate"],
-    totals: list[int],
-    iterations: list[int],
-    errors: dict[int, ValueError],
-    stopped: set[int],
-    log_interval: int | None,
-) -> None:
-    """
-    The env steps between two stacked gradient steps: each member of ``ready`` steps its envs (one stacked forward pass
-    chooses the actions of all, at each env step) until its rollout ends in an update with transitions to train
-    (``updates``), its ``learn`` ends, or it stops (``stopped``; ``errors`` for a non-finite value).
-
-    :param ready: the members free to step (no update in progress, and a rollout under way or env steps left)
-    :param rollouts: every member's rollout loop
-    :param trainer: the stacked q̂
-    :param updates: the updates in progress, by member: those started here are added
-    :param totals: every member's env steps to train for
-    :param iterations: every member's rollouts so far (counted here)
-    :param errors: the members' errors, by member
-    :param stopped: the members stopped
-    :param log_interval: ``learn``'s
-    """
-    while ready:
-        q_values = trainer.q_values()
-        stepping, ready = ready, []
-        for k in stepping:
-            model = rollouts[k].model
-            try:
-                # (q̂ from the stacked forward pass: no forward pass of the member's own)
-                model._next_q_values = q_values[k]
-                complete = rollouts[k].step()
-            except ValueError as error:
-                errors[k] = error
-                stopped.add(k)
-                continue
-            if complete is None:  # (the callback stopped training)
-                stopped.add(k)
-                continue
-            if not complete:
-                ready.append(k)
-                continue
-            iterations[k] += 1
-            model._update_current_progress_remaining(model.num_timesteps, totals[k])
-            batch = model._start_update()
-            if batch is not None:
-                updates[k] = _MemberUpdate(batch, model._update_slices(len(batch.targets)), model.gradient_steps)
-                continue
-            dump(model, iterations[k], log_interval)
-            if model.num_timesteps < totals[k]:
-                ready.append(k)
-
-
-class _MemberUpdate:
+class _SARSAUpdate:
     """
     A member's update in progress: its transitions (``NStepSARSA._start_update``'s batch), trained one stacked step at
     a time as ``NStepSARSA.train`` trains them (``_update_slices``: the whole batch at each of ``gradient_steps`` steps
@@ -245,13 +105,17 @@ class _MemberUpdate:
         return self.chunks[self.round % self.n_chunks]
 
 
-class _LockstepTrainer:
+class _StackedQ:
     """
-    The stacked q̂ of the members of one ``learn`` call: built from their weights, shared with them while it lives,
-    handed back by ``close``.
+    The stacked q̂ of the members of one ``learn`` call (the population's ``Trainer``): built from their weights,
+    shared with them while it lives, handed back by ``close``.
 
     :param models: the members
     """
+
+    #: A member takes its first n − 1 steps of an episode, with nothing to train, without waiting for the others'
+    #: gradient steps: its weights do not change before its next update
+    steps_again = True
 
     def __init__(self, models: list[NStepSARSA]) -> None:
         self.models = models
@@ -275,13 +139,25 @@ class _LockstepTrainer:
         self.max_grad_norm = models[0].max_grad_norm
         self.huber = models[0].loss_function == "huber"
 
-    def q_values(self) -> np.ndarray:
+    def forward(self) -> np.ndarray:
         """:return: q̂(S, ·) of every member's current observations, one stacked forward pass, (K, n_envs, n_actions)"""
         observations = np.stack([np.asarray(model._last_obs) for model in self.models])
         x = th.as_tensor(observations, device=self.device).float()
         return self.stacked.inference(x.reshape(*x.shape[:2], -1)).cpu().numpy()
 
-    def step(self, updates: dict[int, "_MemberUpdate"]) -> list[int]:
+    def hand(self, model: NStepSARSA, outputs: np.ndarray | None, k: int) -> None:
+        """Member k's q̂(S, ·) for its next ε-greedy choice, in place of a forward pass of its own (None: none)."""
+        model._next_q_values = None if outputs is None else outputs[k]
+
+    def start(self, model: NStepSARSA, batch: TrainingBatch) -> "_SARSAUpdate":
+        """:return: the update of ``batch``, in the gradient steps of its ``train`` (``_update_slices``)"""
+        return _SARSAUpdate(batch, model._update_slices(len(batch.targets)), model.gradient_steps)
+
+    def finish(self, model: NStepSARSA, update: "_SARSAUpdate") -> None:
+        """The member's ``_finish_update``, with what the update's gradient steps gave."""
+        model._finish_update(update.batch, update.n_chunks, update.q_first, update.losses)
+
+    def step(self, updates: dict[int, "_SARSAUpdate"]) -> list[int]:
         """
         One stacked gradient step: every member with an update in progress takes the gradient step of its next chunk
         (``NStepSARSA.train``'s: its whole batch in the batch mode, its next transition in time order in the per-step
