@@ -429,9 +429,28 @@ ModelT = TypeVar("ModelT", bound=BaseAlgorithm)
 
 class Population(Generic[ModelT]):
     """
-    K models of one algorithm and setting, each with its own seed and env, trained in lockstep: the ``learn`` of
-    ``NStepSARSAPopulation`` and ``REINFORCEPopulation``, which say what their members share (their stacked networks,
-    ``_trainer``) and what they cover (``_check``).
+    K models of one algorithm and setting, each built as usual with its own seed and env, trained in lockstep: each
+    member steps its own envs with its own schedules, episode boundaries, logger, callback and buffer (its own
+    ``_training_batch``), as if it ran alone; what the members share is the networks' arithmetic (``_trainer``:
+    ``StackedMLP`` networks, one ``torch.baddbmm`` per layer for all members, and a ``StackedAdam`` of each, with each
+    member's own Adam step count and learning rate). One stacked forward pass chooses every member's actions at each
+    env step, and one stacked gradient step trains every member with an update in progress, each on the mean loss of
+    its own transitions (members' chunks of other lengths padded to the longest) and, where ``max_grad_norm`` is set,
+    with its gradient clipped to its own norm. This class is the ``learn`` of ``NStepSARSAPopulation`` and
+    ``REINFORCEPopulation``, which say what their members share and what they cover (``_check``).
+
+    Member k starts from its own model's weights (those of the separate run with seed k) and Adam states. While
+    ``learn`` runs, its parameters are views into the stacked tensors (the same ``Parameter`` objects, with shared
+    storage): its own code paths (its targets' bootstrap values, its ``predict`` in a callback) read the current weights
+    with no copying. When ``learn`` returns (or raises), each member's parameters get storage of their own again and its
+    optimizers the Adam states of its slices: the members are K ordinary models that save, load, predict and ``learn``
+    on their own as any other.
+
+    Member k's behaviour policy draws from a NumPy generator of its own (``member_rng``), kept by the population across
+    ``learn`` calls, not from the global generator a separate run draws from: its draws do not depend on the other
+    members, and a population of the same seeds repeats itself to the bit on the CPU. A separate run with the same seed
+    sees the same transitions only where it draws the same (``model._action_rng`` set to that generator, as the tests
+    do).
 
     :param models: the members, models of one setting (every argument but ``seed`` and ``env``), each with its own
         seed (not None) and env

@@ -23,51 +23,26 @@ MASKED_LOGIT = -1e8
 
 class REINFORCEPopulation(Population[REINFORCE]):
     """
-    K ``REINFORCE`` models of one setting (REINFORCE with baseline, Sutton & Barto §13.4, or plain REINFORCE, §13.3),
-    each built as usual with its own seed and env, trained in lockstep: each member steps its own env, with its own
-    episode boundaries, learning-rate schedules and decays, logger, callback and ``TrajectoryBuffer`` (its own
-    ``_training_batch``: its episodes and their returns G_t), as if it ran alone; what the members share is the
-    networks' arithmetic. The members' policy networks π(a|s, θ) (``mlp_extractor.policy_net`` and ``action_net``)
-    are one ``StackedMLP`` and their value networks v̂(s, w) (``mlp_extractor.value_net`` and ``value_net``) another,
-    each with a ``StackedAdam`` (each member its own Adam step count and learning rate, α^θ and α^w as its own
-    optimizers hold them after its schedule and decay). One stacked forward pass of π gives every member's logits at
-    each env step, and one stacked gradient step trains every member that has an update in progress:
-
-    - ``update_mode="batch"``: a member's update is one gradient step of each network on the mean over its batch (the
-      members updating at one env step have batches of different lengths: padded to the longest, each member's mean
-      over its own steps);
-    - ``update_mode="per_step"``: the book's loop, the update's T steps one stacked gradient step at a time, while the
-      other members go on with their env steps and updates (each member makes the updates of its separate run, in
-      the same order).
-
-    Where ``max_grad_norm`` is set, each member's gradient of each network is clipped to its own global norm, as
-    ``REINFORCE`` clips its two networks' gradients separately.
-
-    Member k starts from its own model's weights (those of the separate run with seed k) and Adam states. While
-    ``learn`` runs, its parameters are views into the stacked tensors (the same ``Parameter`` objects, with shared
-    storage): its own code paths (v̂ of a truncation's final state in its returns, its ``predict`` in a callback) read
-    the current weights with no copying. When ``learn`` returns (or raises), each member's parameters get storage of
-    their own again and its two optimizers the Adam states of its slices: the members are K ordinary models that
-    save, load, predict and ``learn`` on their own as any other.
-
-    The actions of member k are drawn from its logits by the inverse CDF of their soft-max (``categorical_inverse_cdf``:
-    the soft-max of every member at once, then one uniform draw per env and step for each member) with a NumPy
-    generator of its own, ``np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(0,)))``, kept by the
-    population across ``learn`` calls, not with torch's global generator that a separate run draws from: member k's
-    draws do not depend on the other members, and a population of the same seeds repeats itself to the bit on the
-    CPU. A separate run with the same seed sees the same transitions only where it draws the same
-    (``model._action_rng`` set to that generator, as the tests do).
+    K ``REINFORCE`` models of one setting (REINFORCE with baseline, Sutton & Barto §13.4, or plain REINFORCE, §13.3)
+    trained in lockstep (``Population``): each member with its own episodes and returns G_t, its policy networks
+    π(a|s, θ) (``mlp_extractor.policy_net`` and ``action_net``) one ``StackedMLP`` and its value networks v̂(s, w)
+    (``mlp_extractor.value_net`` and ``value_net``) another, each member's α^θ and α^w as its own optimizers hold them
+    after its schedule and decay, and each network's gradient clipped on its own, as ``REINFORCE`` clips them. A
+    member's update is one gradient step of each network on the mean over its batch (``update_mode="batch"``), or the
+    book's loop (``"per_step"``), the update's T steps one stacked gradient step at a time. Member k's actions are drawn
+    from its logits by the inverse CDF of their soft-max (``categorical_inverse_cdf``: the soft-max of every member at
+    once, then one uniform draw per env and step of its generator).
 
     Covered: both update modes, ``use_baseline`` True and False, ``n_episodes``, ``normalize_advantage``,
     ``gamma_t_factor``, ``ent_coef``, ``max_grad_norm``, schedules and decays, several envs per member, Discrete
-    actions, ``"MlpPolicy"`` (linear layers and elementwise activations) over flat Box observations, and
-    ``torch.optim.Adam`` without weight decay, AMSGrad or ``maximize``, and envs with action masks (each member's own).
-    Anything else not covered is refused with a ``ValueError``/``TypeError`` that names it.
+    actions, envs with action masks, ``"MlpPolicy"`` (linear layers and elementwise activations) over flat Box
+    observations, and ``torch.optim.Adam`` without weight decay, AMSGrad or ``maximize``. Anything else is refused
+    with a ``ValueError``/``TypeError`` that names it.
 
     :param models: the members, ``REINFORCE`` models of one setting (every argument but ``seed`` and ``env``), each
         with its own seed (not None) and env
     :raises ValueError: for members of different settings, without a seed or an env, or of a setting not covered
-    :raises TypeError: for networks or optimizers not covered
+    :raises TypeError: for networks, observations or optimizers not covered
     """
 
     def _check(self, models: Sequence[Any]) -> None:

@@ -18,49 +18,26 @@ from sb3_classic.sarsa.policies import LinearQPolicy
 
 class NStepSARSAPopulation(Population[NStepSARSA]):
     """
-    K ``NStepSARSA`` models of one setting (episodic semi-gradient n-step SARSA, Sutton & Barto §10.2), each built as
-    usual with its own seed and env, trained in lockstep: each member steps its own env with its own ε, schedules,
-    episode boundaries, logger, callback and n-step targets (its own ``_training_batch``), as if it ran alone; what the
-    members share is q̂'s arithmetic. Their q̂s are one ``StackedMLP`` (weights (K, in, out) per layer, one
-    ``torch.baddbmm`` per layer): one stacked forward pass chooses every member's action at each env step, and one
-    stacked gradient step trains every member with a gradient step to take, with one ``StackedAdam`` (each member its
-    own Adam step count and learning rate; a member with nothing to train at a step is not moved) and, where
-    ``max_grad_norm`` is set, each member's gradient clipped to its own global norm. A member's update makes the
-    gradient steps of its separate run's ``train``: in the per-step mode one per transition, in time order, in the
-    batch mode ``gradient_steps`` on the mean loss of its whole batch. The members' batches differ in size (their
-    episodes end at other steps): a stacked step takes them side by side, padded with zeros to the longest, and each
-    member's loss is the mean over its own transitions only.
+    K ``NStepSARSA`` models of one setting (episodic semi-gradient n-step SARSA, Sutton & Barto §10.2) trained in
+    lockstep (``Population``): each member with its own ε, n-step targets and draws (ε and ties), their q̂s one
+    ``StackedMLP``. A member's update makes the gradient steps of its separate run's ``train``: in the per-step mode one
+    per transition, in time order, in the batch mode ``gradient_steps`` on the mean loss of its whole batch; a member
+    with nothing to train at a stacked step is not moved.
 
     The copies of q̂ (the bootstrap network of ``target_update_interval``, the weight average of ``averaging_tau``)
     are stacked as q̂ is, each member's copy a view of its slice: each member's targets bootstrap from its own copy,
     and its ``_move_copies`` moves its copy (w⁻ ← τw + (1 − τ)w⁻) after its own updates only, as in its separate run.
 
-    Member k starts from its own model's weights (those of the separate run with seed k) and Adam state. While
-    ``learn`` runs, each member's q̂ parameters are views into the stacked tensors (the same ``Parameter`` objects, with
-    shared storage): its own code paths (the bootstrap values of its targets, a forward pass where the rollout's cached
-    q̂ is not current, its ``predict`` in a callback) read the current weights with no copying. When ``learn`` returns
-    (or raises), each member's parameters get storage of their own again and its optimizer the Adam state of its slice:
-    the members are K ordinary models that save, load, predict and ``learn`` on their own as any other.
-
-    The behaviour policy's draws (ε and ties) of member k come from a NumPy generator of its own,
-    ``np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(0,)))``, kept by the population across ``learn``
-    calls, not from NumPy's global one that a separate run draws from: member k's draws do not depend on the other
-    members, and a population of the same seeds repeats itself to the bit on the CPU. A separate run with the same
-    seed sees the same transitions only where it draws the same (``model._action_rng`` set to that generator, as the
-    tests do).
-
-    Covered: both ``update_mode`` values with any ``train_freq``, ``gradient_steps`` and ``n_steps`` (the batch mode of
-    the tuned settings included), ``loss_function``, ``expected_sarsa``, ``td_lambda``, the copies of q̂
-    (``target_update_interval``, ``tau``, ``averaging_tau``), schedules and decays, several envs per member;
-    ``"MlpPolicy"`` (linear layers, LayerNorm and elementwise activations) over flat Box observations, envs with
-    action masks (each member's own, read at each of its steps), and ``torch.optim.Adam`` without weight decay,
-    AMSGrad or ``maximize``. Anything else (``"LinearPolicy"``, CNN or Dict observations, another optimizer) is refused
-    with a ``ValueError``/``TypeError`` that names it.
+    Covered: both ``update_mode`` values with any ``train_freq``, ``gradient_steps`` and ``n_steps``, ``loss_function``,
+    ``expected_sarsa``, ``td_lambda``, the copies of q̂, schedules and decays, several envs per member, envs with action
+    masks; ``"MlpPolicy"`` (linear layers, LayerNorm and elementwise activations) over flat Box observations, and
+    ``torch.optim.Adam`` without weight decay, AMSGrad or ``maximize``. Anything else (``"LinearPolicy"``, CNN, Dict or
+    Discrete observations, another optimizer) is refused with a ``ValueError``/``TypeError`` that names it.
 
     :param models: the members, ``NStepSARSA`` models of one setting (every argument but ``seed`` and ``env``), each
         with its own seed (not None) and env
     :raises ValueError: for members of different settings, or without a seed or an env
-    :raises TypeError: for a q̂ or optimizer not covered
+    :raises TypeError: for a q̂, observations or optimizer not covered
     """
 
     def _check(self, models: Sequence[Any]) -> None:
