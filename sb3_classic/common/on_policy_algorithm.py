@@ -3,7 +3,7 @@
 import math
 import warnings
 from abc import abstractmethod
-from collections.abc import Sequence
+from collections.abc import Callable, Generator, Sequence
 from typing import Any, TypeVar
 
 import numpy as np
@@ -44,6 +44,26 @@ from sb3_classic.common.schedules import StepDecay
 from sb3_classic.common.utils import check_bool, check_positive_int
 
 SelfClassicOnPolicyAlgorithm = TypeVar("SelfClassicOnPolicyAlgorithm", bound="ClassicOnPolicyAlgorithm")
+
+#: An algorithm's update (its ``_update``), read top to bottom, whose gradient steps its caller makes: it yields the
+#: arguments of each gradient step and is sent back what the step returned (``run_update`` with the model's own
+#: ``_gradient_step``, or a population's stacked step for all its members at once)
+Update = Generator[tuple[Any, ...], Any, None]
+
+
+def run_update(update: Update, gradient_step: Callable[..., Any]) -> None:
+    """
+    Make the gradient steps of ``update`` one after the other with ``gradient_step``, until the update ends.
+
+    :param update: an algorithm's ``_update()``
+    :param gradient_step: its ``_gradient_step``
+    """
+    arguments = next(update, None)
+    while arguments is not None:
+        try:
+            arguments = update.send(gradient_step(*arguments))
+        except StopIteration:
+            return
 
 
 class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):

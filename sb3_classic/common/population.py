@@ -17,7 +17,7 @@ from stable_baselines3.common.type_aliases import MaybeCallback
 from torch import nn
 
 from sb3_classic.common.arguments import constructor_parameters
-from sb3_classic.common.buffers import TrainingBatch
+from sb3_classic.common.on_policy_algorithm import Update
 from sb3_classic.common.stacked import StackedAdam, StackedMLP, parametrized_layers
 from sb3_classic.common.threads import one_thread_unless_chosen
 from sb3_classic.common.utils import check_positive_int
@@ -410,17 +410,49 @@ class Trainer(Protocol):
     def hand(self, model: Any, outputs: Any, k: int) -> None:
         """Give member ``k`` its part of ``forward``'s ``outputs`` for its next env step (None: take it back)."""
 
-    def start(self, model: Any, batch: TrainingBatch) -> Any:
-        """:return: the member's update of ``batch`` (its ``_start_update``'s), to train one stacked step at a time"""
+    def step(self, updates: dict[int, "MemberUpdate"]) -> list[int]:
+        """
+        One stacked gradient step of the members with an update in progress, each on the arguments of its own next
+        gradient step (``MemberUpdate.arguments``), each sent back what its model's ``_gradient_step`` would return.
 
-    def step(self, updates: dict[int, Any]) -> list[int]:
-        """One stacked gradient step of the members with an update in progress; :return: those it finished"""
-
-    def finish(self, model: Any, update: Any) -> None:
-        """The end of a member's update (its ``_finish_update``)."""
+        :return: the members whose update this step finished
+        """
 
     def close(self) -> None:
         """Hand each member its own parameters and optimizer states back."""
+
+
+class MemberUpdate:
+    """
+    A member's update in progress: its model's own ``_update()``, whose gradient steps the population makes one stacked
+    step at a time while the other members go on with their env steps and updates.
+
+    :param update: the member's ``_update()``
+    :param arguments: the arguments of its first gradient step (what it yielded first)
+    """
+
+    def __init__(self, update: Update, arguments: tuple[Any, ...]) -> None:
+        self.update = update
+        #: the arguments of the member's next gradient step (those of its ``_gradient_step``)
+        self.arguments = arguments
+
+    @classmethod
+    def start(cls, model: Any) -> "MemberUpdate | None":
+        """:return: the update of ``model``'s complete rollout, or None if it has nothing to train (its log made)"""
+        update = model._update()
+        arguments = next(update, None)
+        return None if arguments is None else cls(update, arguments)
+
+    def send(self, result: Any) -> bool:
+        """
+        :param result: what the member's gradient step gave (as its ``_gradient_step`` returns it)
+        :return: whether its update goes on (False: it ended, its transitions marked trained and its log made)
+        """
+        try:
+            self.arguments = self.update.send(result)
+        except StopIteration:
+            return False
+        return True
 
 
 #: The algorithm of a population's members
@@ -544,7 +576,7 @@ class Lockstep:
         self.iterations = [0] * len(models)
         self.rollouts = [MemberRollout(model, callback) for model, callback in zip(models, callbacks, strict=True)]
         #: the updates in progress, by member
-        self.updates: dict[int, Any] = {}
+        self.updates: dict[int, MemberUpdate] = {}
 
     def run(self) -> None:
         """Train until every member has taken its env steps (or stopped)."""
@@ -562,7 +594,7 @@ class Lockstep:
                 outputs = self.trainer.forward()
                 stepping = [k for k in stepping if self._step(k, outputs)]
             for k in self.trainer.step(self.updates):
-                self.trainer.finish(self.models[k], self.updates.pop(k))
+                del self.updates[k]
                 dump(self.models[k], self.iterations[k], self.log_interval)
 
     def _step(self, k: int, outputs: Any) -> bool:
@@ -591,9 +623,9 @@ class Lockstep:
             return self.trainer.steps_again
         self.iterations[k] += 1
         model._update_current_progress_remaining(model.num_timesteps, self.totals[k])
-        batch = model._start_update()
-        if batch is not None:
-            self.updates[k] = self.trainer.start(model, batch)
+        update = MemberUpdate.start(model)
+        if update is not None:
+            self.updates[k] = update
             return False
         dump(model, self.iterations[k], self.log_interval)
         return self.trainer.steps_again and model.num_timesteps < self.totals[k]

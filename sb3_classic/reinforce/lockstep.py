@@ -11,8 +11,7 @@ from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.torch_layers import FlattenExtractor
 from torch import nn
 
-from sb3_classic.common.buffers import TrainingBatch
-from sb3_classic.common.population import Population, StackedPart, check_population, layer_parameters
+from sb3_classic.common.population import MemberUpdate, Population, StackedPart, check_population, layer_parameters
 from sb3_classic.common.stacked import StackedMLP, clip_grad_norms_per_member
 from sb3_classic.reinforce.policies import REINFORCEPolicy
 from sb3_classic.reinforce.reinforce import REINFORCE, reinforce_losses, softmax_cdf
@@ -53,44 +52,6 @@ class REINFORCEPopulation(Population[REINFORCE]):
 
     def _log_interval(self) -> int:
         return 4  # (REINFORCE.learn's default)
-
-
-class _REINFORCEUpdate:
-    """
-    A member's update in progress: its steps (``REINFORCE._start_update``'s batch), trained one chunk per stacked
-    gradient step (all of them at once in the batch mode, one at a time in the per-step mode), and what
-    ``_finish_update`` logs of them.
-
-    :param model: the member
-    :param batch: the update's steps
-    """
-
-    def __init__(self, model: REINFORCE, batch: TrainingBatch) -> None:
-        self.batch = batch
-        self.length = length = len(batch.targets)
-        self.observations = np.asarray(batch.observations, dtype=np.float32).reshape(length, -1)
-        self.actions = np.asarray(batch.actions).reshape(length)
-        self.returns = np.asarray(batch.targets, dtype=np.float32)
-        self.episode_steps = np.asarray(batch.episode_steps)
-        #: the legal actions at each step, shape (length, n_actions), where masks make some action illegal
-        masks = batch.action_masks
-        self.action_masks = None if masks is None or masks.all() else np.asarray(masks, dtype=bool).reshape(length, -1)
-        #: the chunks of steps, one per gradient step (``_update_slices``), and the next one
-        self.chunks = [(0, length)] if model.update_mode == "batch" else [(t, t + 1) for t in range(length)]
-        self.next = 0
-        #: α^θ and α^w of this update (set by ``_start_update``)
-        self.policy_lr = model.policy.optimizer.param_groups[0]["lr"]
-        value_optimizer = model.policy.value_optimizer
-        self.value_lr = 0.0 if value_optimizer is None else value_optimizer.param_groups[0]["lr"]
-        #: each gradient step's policy, entropy and value losses, and v̂(S_t) before the steps
-        self.losses: list[tuple[float, float, float]] = []
-        self.values: list[np.ndarray] = []
-
-    def finish(self, model: REINFORCE) -> None:
-        """``REINFORCE._finish_update`` with the update's losses and values."""
-        losses = th.tensor(self.losses, dtype=th.float32)
-        values = th.as_tensor(np.concatenate(self.values)) if model.use_baseline else None
-        model._finish_update(self.batch, losses[:, 0], losses[:, 1], losses[:, 2], values)
 
 
 def _policy_network(policy: REINFORCEPolicy) -> nn.Sequential:
@@ -156,19 +117,11 @@ class _StackedPolicy:
         """Member k's logits and their soft-max for its next draw, in place of a forward pass of its own (None: none)."""
         model._next_logits, model._next_cdf = (None, None) if outputs is None else (outputs[0][k], outputs[1][k])
 
-    def start(self, model: REINFORCE, batch: TrainingBatch) -> _REINFORCEUpdate:
-        """:return: the update of ``batch``: one gradient step of its whole batch, or one per step in time order"""
-        return _REINFORCEUpdate(model, batch)
-
-    def finish(self, model: REINFORCE, update: _REINFORCEUpdate) -> None:
-        """The member's ``_finish_update``, with the update's losses and values."""
-        update.finish(model)
-
-    def step(self, updates: dict[int, _REINFORCEUpdate]) -> list[int]:
+    def step(self, updates: dict[int, MemberUpdate]) -> list[int]:
         """
-        One stacked gradient step of each network: every member with an update in progress takes the gradient step
-        of its next chunk (``REINFORCE.train``: its whole batch, or its next step in time order); the others are not
-        stepped.
+        One stacked gradient step of each network: every member with an update in progress takes its next gradient step
+        (its ``_update``'s: its whole batch, or its next step in time order), each on the mean over its own steps; the
+        others are not stepped.
 
         :param updates: the members' updates in progress, by member
         :return: the members whose update this step finished
@@ -176,38 +129,43 @@ class _StackedPolicy:
         if not updates:
             return []
         members = sorted(updates)
-        chunks = [updates[k].chunks[updates[k].next] for k in members]
-        lengths = np.array([stop - start for start, stop in chunks])
+        chunks = [updates[k].arguments for k in members]
+        lengths = np.array([len(chunk[2]) for chunk in chunks])
         n_members, width = len(members), int(lengths.max())
         x = np.zeros((n_members, width, self.features), dtype=np.float32)
         actions = np.zeros((n_members, width), dtype=np.int64)
         returns = np.zeros((n_members, width), dtype=np.float32)
         episode_steps = np.zeros((n_members, width), dtype=np.int64)
-        masked = [updates[k].action_masks is not None for k in members]
-        # (every action legal where no member's chunk has masks, and in the padding)
-        masks = np.ones((n_members, width, self.n_actions), dtype=bool) if any(masked) else None
-        for row, (k, (start, stop)) in enumerate(zip(members, chunks, strict=True)):
-            update, n = updates[k], stop - start
-            if masks is not None and update.action_masks is not None:
-                masks[row, :n] = update.action_masks[start:stop]
-            x[row, :n] = update.observations[start:stop]
-            actions[row, :n] = update.actions[start:stop]
-            returns[row, :n] = update.returns[start:stop]
-            episode_steps[row, :n] = update.episode_steps[start:stop]
-        policy_lrs = np.zeros(len(self.models))
-        value_lrs = np.zeros(len(self.models))
+        # (every action legal where no member's chunk has masks that make one illegal, and in the padding)
+        restricting = [chunk[4] is not None and not bool(chunk[4].all()) for chunk in chunks]
+        masks = np.ones((n_members, width, self.n_actions), dtype=bool) if any(restricting) else None
+        for row, (observations, member_actions, member_returns, steps, member_masks) in enumerate(chunks):
+            n = lengths[row]
+            if masks is not None and member_masks is not None:
+                masks[row, :n] = member_masks.reshape(n, -1).cpu().numpy()
+            x[row, :n] = observations.reshape(n, -1).cpu().numpy()
+            actions[row, :n] = member_actions.reshape(n).cpu().numpy()
+            returns[row, :n] = member_returns.cpu().numpy()
+            episode_steps[row, :n] = steps.cpu().numpy()
+        # α^θ and α^w of each member's update (set by its _update)
+        policy_lrs, value_lrs = np.zeros(len(self.models)), np.zeros(len(self.models))
         for k in members:
-            policy_lrs[k], value_lrs[k] = updates[k].policy_lr, updates[k].value_lr
+            policy = self.models[k].policy
+            policy_lrs[k] = policy.optimizer.param_groups[0]["lr"]
+            value_lrs[k] = 0.0 if policy.value_optimizer is None else policy.value_optimizer.param_groups[0]["lr"]
         losses, values = self._gradient_step(
             x, actions, returns, episode_steps, lengths, np.array(members), policy_lrs, value_lrs, masks
         )
         finished = []
         for row, k in enumerate(members):
-            update = updates[k]
-            update.losses.append((losses[0][row], losses[1][row], losses[2][row]))
-            update.values.append(values[row, : lengths[row]])
-            update.next += 1
-            if update.next == len(update.chunks):
+            # (what the member's _gradient_step returns)
+            result = dict(
+                policy_loss=th.tensor(losses[0][row]),
+                entropy_loss=th.tensor(losses[1][row]),
+                value_loss=th.tensor(losses[2][row]),
+                values=th.as_tensor(values[row, : lengths[row]]),
+            )
+            if not updates[k].send(result):
                 finished.append(k)
         return finished
 

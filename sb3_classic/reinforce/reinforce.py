@@ -10,7 +10,7 @@ from stable_baselines3.common.utils import FloatSchedule, explained_variance, ob
 
 from sb3_classic.common.arguments import LOADING
 from sb3_classic.common.buffers import TrainingBatch, select
-from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
+from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm, Update, run_update
 from sb3_classic.common.returns import discounted_returns
 from sb3_classic.common.utils import check_bool, check_choice, check_learning_rate, check_positive_int, check_range
 from sb3_classic.reinforce.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, REINFORCEPolicy
@@ -478,7 +478,24 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
 
     def train(self) -> None:
         """Update both networks on every complete episode in the buffer (``update_mode``: batch mean or per step)."""
-        batch = self._start_update()
+        run_update(self._update(), self._gradient_step)
+
+    def _update(self) -> Update:
+        """
+        The update of ``train``, its gradient steps made by the caller: it yields the steps of each gradient step,
+        (S_t, A_t, G_t, t, masks), and is sent back what the step gave (``_gradient_step``'s losses and v̂(S_t) before
+        the step). ``train`` makes them with ``_gradient_step``; a population with its stacked step.
+        """
+        # The learning rates α^θ and α^w of this update (schedule and decay)
+        schedules = [(self.policy.optimizer, self.lr_schedule, "train/learning_rate")]
+        if self.policy.value_optimizer is not None:
+            schedules.append((self.policy.value_optimizer, self.value_lr_schedule, "train/value_learning_rate"))
+        self._update_learning_rates(schedules)
+        # v̂(S_T) of the truncations is no training batch: evaluation mode (dropout off, BatchNorm's running statistics
+        # unmoved), as A2C/PPO compute their bootstrap values; training mode for the gradient steps only
+        self.policy.set_training_mode(False)
+        batch = self._training_batch()
+        self.policy.set_training_mode(True)
         if batch is None:
             return
         observations = obs_as_tensor(batch.observations, self.device)
@@ -491,65 +508,21 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         # several envs, the episodes' steps interleave in time order)
         steps = []
         for chunk in self._update_slices(len(returns)):
-            chunk_observations = select(observations, chunk)  # type: ignore[arg-type]
             chunk_masks = None if masks is None else masks[chunk]
-            steps.append(
-                self._gradient_step(chunk_observations, actions[chunk], returns[chunk], episode_steps[chunk], chunk_masks)  # type: ignore[arg-type]
-            )
-        values = th.cat([step["values"] for step in steps]) if self.use_baseline else None
-        self._finish_update(
-            batch,
-            th.stack([step["policy_loss"] for step in steps]),
-            th.stack([step["entropy_loss"] for step in steps]),
-            th.stack([step["value_loss"] for step in steps]),
-            values,
-        )
+            chunk_observations = select(observations, chunk)  # type: ignore[arg-type]
+            steps.append((yield chunk_observations, actions[chunk], returns[chunk], episode_steps[chunk], chunk_masks))
 
-    def _start_update(self) -> TrainingBatch | None:
-        """
-        The first half of ``train``: the learning rates α^θ and α^w of this update set (schedule and decay) and
-        logged.
-
-        :return: the update's steps (``_training_batch``), None if no episode has ended
-        """
-        schedules = [(self.policy.optimizer, self.lr_schedule, "train/learning_rate")]
-        if self.policy.value_optimizer is not None:
-            schedules.append((self.policy.value_optimizer, self.value_lr_schedule, "train/value_learning_rate"))
-        self._update_learning_rates(schedules)
-        # v̂(S_T) of the truncations is no training batch: evaluation mode (dropout off, BatchNorm's running statistics
-        # unmoved), as A2C/PPO compute their bootstrap values; training mode for the gradient steps only
-        self.policy.set_training_mode(False)
-        batch = self._training_batch()
-        self.policy.set_training_mode(True)
-        return batch
-
-    def _finish_update(
-        self,
-        batch: TrainingBatch,
-        policy_losses: th.Tensor,
-        entropy_losses: th.Tensor,
-        value_losses: th.Tensor,
-        values: th.Tensor | None,
-    ) -> None:
-        """
-        The second half of ``train``, after its gradient steps: the steps marked trained, the counts and the log.
-
-        :param batch: the update's steps (``_start_update``'s)
-        :param policy_losses: each gradient step's policy loss, shape (n_gradient_steps,)
-        :param entropy_losses: each gradient step's entropy loss, shape (n_gradient_steps,)
-        :param value_losses: each gradient step's value loss, shape (n_gradient_steps,)
-        :param values: v̂(S_t, w) of the batch's steps before their gradient steps, shape (B,); None without a baseline
-        """
         self.rollout_buffer.mark_trained(batch.n_trained)
-        self._n_updates += len(policy_losses)
+        self._n_updates += len(steps)
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         # Every episode in the buffer is held from its first step (t = 0)
         self.logger.record("train/n_episodes", int((batch.episode_steps == 0).sum()))
-        self.logger.record("train/policy_loss", policy_losses.mean().item())
-        self.logger.record("train/entropy_loss", entropy_losses.mean().item())
-        if values is not None:
-            self.logger.record("train/value_loss", value_losses.mean().item())
-            self.logger.record("train/explained_variance", explained_variance(values.cpu().numpy(), batch.targets))
+        self.logger.record("train/policy_loss", th.stack([step["policy_loss"] for step in steps]).mean().item())
+        self.logger.record("train/entropy_loss", th.stack([step["entropy_loss"] for step in steps]).mean().item())
+        if self.use_baseline:
+            values = th.cat([step["values"] for step in steps]).cpu().numpy()
+            self.logger.record("train/value_loss", th.stack([step["value_loss"] for step in steps]).mean().item())
+            self.logger.record("train/explained_variance", explained_variance(values, batch.targets))
         if hasattr(self.policy, "log_std"):
             self.logger.record("train/std", th.exp(self.policy.log_std).mean().item())
 

@@ -9,8 +9,7 @@ from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.torch_layers import FlattenExtractor
 from stable_baselines3.dqn.policies import QNetwork
 
-from sb3_classic.common.buffers import TrainingBatch
-from sb3_classic.common.population import Population, StackedPart, check_population
+from sb3_classic.common.population import MemberUpdate, Population, StackedPart, check_population
 from sb3_classic.common.stacked import StackedMLP, clip_grad_norms_per_member
 from sb3_classic.sarsa.nstep_sarsa import LOG_EVERY_STEPS, NStepSARSA, sarsa_losses
 from sb3_classic.sarsa.policies import LinearQPolicy
@@ -49,37 +48,6 @@ class NStepSARSAPopulation(Population[NStepSARSA]):
     def _log_interval(self) -> int:
         # (NStepSARSA.learn's "auto": a dump about every LOG_EVERY_STEPS env steps per env)
         return -(-LOG_EVERY_STEPS // self.models[0].train_freq)
-
-
-class _SARSAUpdate:
-    """
-    A member's update in progress: its transitions (``NStepSARSA._start_update``'s batch), trained one stacked step at
-    a time as ``NStepSARSA.train`` trains them (``_update_slices``: the whole batch at each of ``gradient_steps`` steps
-    in the batch mode, one transition after the other, ``gradient_steps`` passes, in the per-step mode), and what
-    ``_finish_update`` logs of them.
-
-    :param batch: the update's transitions
-    :param chunks: what each gradient step of one pass takes (``NStepSARSA._update_slices``)
-    :param gradient_steps: passes over them
-    """
-
-    def __init__(self, batch: TrainingBatch, chunks: list[slice], gradient_steps: int) -> None:
-        self.batch = batch
-        self.length = len(batch.targets)
-        self.observations = np.asarray(batch.observations, dtype=np.float32).reshape(self.length, -1)
-        self.actions = np.asarray(batch.actions, dtype=np.int64).reshape(self.length)
-        self.chunks = chunks
-        self.n_chunks = len(chunks)
-        #: the gradient steps of the update, and those made
-        self.rounds, self.round = gradient_steps * self.n_chunks, 0
-        #: q̂(S_t, A_t) before the first pass, one array per chunk, and every gradient step's loss
-        self.q_first: list[np.ndarray] = []
-        self.losses: list[float] = []
-
-    @property
-    def chunk(self) -> slice:
-        """The transitions of the next gradient step."""
-        return self.chunks[self.round % self.n_chunks]
 
 
 class _StackedQ:
@@ -126,19 +94,11 @@ class _StackedQ:
         """Member k's q̂(S, ·) for its next ε-greedy choice, in place of a forward pass of its own (None: none)."""
         model._next_q_values = None if outputs is None else outputs[k]
 
-    def start(self, model: NStepSARSA, batch: TrainingBatch) -> "_SARSAUpdate":
-        """:return: the update of ``batch``, in the gradient steps of its ``train`` (``_update_slices``)"""
-        return _SARSAUpdate(batch, model._update_slices(len(batch.targets)), model.gradient_steps)
-
-    def finish(self, model: NStepSARSA, update: "_SARSAUpdate") -> None:
-        """The member's ``_finish_update``, with what the update's gradient steps gave."""
-        model._finish_update(update.batch, update.n_chunks, update.q_first, update.losses)
-
-    def step(self, updates: dict[int, "_SARSAUpdate"]) -> list[int]:
+    def step(self, updates: dict[int, MemberUpdate]) -> list[int]:
         """
-        One stacked gradient step: every member with an update in progress takes the gradient step of its next chunk
-        (``NStepSARSA.train``'s: its whole batch in the batch mode, its next transition in time order in the per-step
-        mode, ``gradient_steps`` times over); the others are not stepped.
+        One stacked gradient step: every member with an update in progress takes its next gradient step (its
+        ``_update``'s: its whole batch in the batch mode, its next transition in time order in the per-step mode,
+        ``gradient_steps`` times over), each on the mean loss of its own transitions; the others are not stepped.
 
         :param updates: the members' updates in progress, by member
         :return: the members whose update this step finished
@@ -146,32 +106,26 @@ class _StackedQ:
         if not updates:
             return []
         n_members = len(self.models)
-        chunks = {k: update.chunk for k, update in updates.items()}
         sizes = np.zeros(n_members, dtype=np.int64)
         for k, update in updates.items():
-            sizes[k] = len(range(*chunks[k].indices(update.length)))
+            sizes[k] = len(update.arguments[2])
         width = int(sizes.max())
-        # The members' chunks side by side, padded with zeros to the longest (the padding weighs nothing in the losses)
+        # The members' transitions side by side, padded with zeros to the longest (the padding weighs nothing in the
+        # losses)
         x = np.zeros((n_members, width, self.features), dtype=np.float32)
         actions = np.zeros((n_members, width, 1), dtype=np.int64)
         targets = np.zeros((n_members, width), dtype=np.float32)
         for k, update in updates.items():
-            chunk, size = chunks[k], sizes[k]
-            x[k, :size] = update.observations[chunk]
-            actions[k, :size, 0] = update.actions[chunk]
-            targets[k, :size] = update.batch.targets[chunk]
+            observations, member_actions, member_targets = update.arguments
+            size = sizes[k]
+            x[k, :size] = np.reshape(observations, (size, -1))
+            actions[k, :size, 0] = np.reshape(member_actions, size)
+            targets[k, :size] = member_targets
         learning_rates = np.array([model.policy.optimizer.param_groups[0]["lr"] for model in self.models], dtype=np.float64)
         active = np.array(list(updates))
         q_predicted, member_losses = self._gradient_step(x, actions, targets, sizes, active, learning_rates)
-        finished = []
-        for k, update in updates.items():
-            update.losses.append(float(member_losses[k]))
-            if update.round < update.n_chunks:
-                update.q_first.append(q_predicted[k, : sizes[k]])
-            update.round += 1
-            if update.round == update.rounds:
-                finished.append(k)
-        return finished
+        # (what each member's _gradient_step returns: q̂(S_t, A_t) before the step, and its loss)
+        return [k for k, update in updates.items() if not update.send((q_predicted[k, : sizes[k]], float(member_losses[k])))]
 
     def _gradient_step(
         self,

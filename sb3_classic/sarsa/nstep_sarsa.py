@@ -13,7 +13,7 @@ from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor
 from sb3_classic.common.arguments import check_arguments
 from sb3_classic.common.buffers import TrainingBatch, select
 from sb3_classic.common.masking import uniform_legal_actions
-from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
+from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm, Update, run_update
 from sb3_classic.common.returns import (
     CompletedWindows,
     completed_windows,
@@ -569,28 +569,13 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
 
     def train(self) -> None:
         """Update q̂ towards the n-step targets of every transition whose target is known and not trained on yet."""
-        batch = self._start_update()
-        if batch is None:
-            return
+        run_update(self._update(), self._gradient_step)
 
-        # Batch: gradient steps on the mean loss of all; per step: each transition's own update, in time order
-        chunks = self._update_slices(len(batch.targets))
-        q_first: list[np.ndarray] = []  # q̂(S_t, A_t) before the update's first pass, for the log
-        losses: list[float] = []  # every gradient step's, for the log's mean (SB3's DQN logs the mean)
-        for gradient_step in range(self.gradient_steps):
-            for chunk in chunks:
-                observations = select(batch.observations, chunk)
-                q_predicted, loss = self._gradient_step(observations, batch.actions[chunk], batch.targets[chunk])
-                losses.append(loss)
-                if gradient_step == 0:
-                    q_first.append(q_predicted)
-        self._finish_update(batch, len(chunks), q_first, losses)
-
-    def _start_update(self) -> TrainingBatch | None:
+    def _update(self) -> Update:
         """
-        The first half of ``train``: the learning rate and ε of this update set and logged.
-
-        :return: (S_t, A_t, G_{t:t+n}) of every transition whose n steps have been taken (S&B eq. 10.4), None if none
+        The update of ``train``, its gradient steps made by the caller: it yields the transitions of each gradient step,
+        (S_t, A_t, G_{t:t+n}) (S&B eq. 10.4), and is sent back what the step gave (``_gradient_step``'s q̂(S_t, A_t)
+        before the step and loss). ``train`` makes them with ``_gradient_step``; a population with its stacked step.
         """
         self._update_learning_rates([(self.policy.optimizer, self.lr_schedule, "train/learning_rate")])
         self._update_exploration_rate()
@@ -600,21 +585,23 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self.policy.set_training_mode(False)
         batch = self._training_batch()
         self.policy.set_training_mode(True)
-        return batch
+        if batch is None:
+            return
 
-    def _finish_update(self, batch: TrainingBatch, n_chunks: int, q_first: list[np.ndarray], losses: list[float]) -> None:
-        """
-        The second half of ``train``, after its gradient steps: the transitions marked trained, the copies of q̂ moved,
-        the counts and the log.
+        # Batch: gradient steps on the mean loss of all; per step: each transition's own update, in time order
+        chunks = self._update_slices(len(batch.targets))
+        q_first: list[np.ndarray] = []  # q̂(S_t, A_t) before the update's first pass, for the log
+        losses: list[float] = []  # every gradient step's, for the log's mean (SB3's DQN logs the mean)
+        for gradient_step in range(self.gradient_steps):
+            for chunk in chunks:
+                q_predicted, loss = yield select(batch.observations, chunk), batch.actions[chunk], batch.targets[chunk]
+                losses.append(loss)
+                if gradient_step == 0:
+                    q_first.append(q_predicted)
 
-        :param batch: the update's transitions (``_start_update``'s)
-        :param n_chunks: the gradient steps of one pass over them (``_update_slices``)
-        :param q_first: q̂(S_t, A_t) before the update's first pass, one array per chunk
-        :param losses: every gradient step's loss
-        """
         self.rollout_buffer.mark_trained(batch.n_trained)
         self._move_copies()
-        self._n_updates += self.gradient_steps * n_chunks
+        self._n_updates += self.gradient_steps * len(chunks)
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         # (the mean of float32 losses in float32, as th.stack(losses).mean() of SB3's DQN)
         self.logger.record("train/loss", losses[0] if len(losses) == 1 else th.tensor(losses).mean().item())
