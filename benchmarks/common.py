@@ -33,6 +33,7 @@ __all__ = [
     "DEFAULT_RESULTS_DIR",
     "ENV_IDS",
     "LABELS",
+    "OPTIONAL_ENV_IDS",
     "OUR_ALGOS",
     "OUR_HYPERPARAMS_DIR",
     "PEER_ALGOS",
@@ -51,6 +52,8 @@ __all__ = [
 
 #: The envs of the benchmark (``python -m benchmarks.run``)
 ENV_IDS = ("CartPole-v1", "Acrobot-v1")
+#: Envs it runs only when ``--envs`` names them (Box2D's, from the ``zoo`` extra)
+OPTIONAL_ENV_IDS = ("LunarLander-v3",)
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 #: The package's hyperparameters (rl-zoo3 format), at the repository root (the wheel ships them inside the package)

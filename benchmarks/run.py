@@ -1,7 +1,8 @@
 """
 The benchmarks, in one command: REINFORCE and NStepSARSA with the package's hyperparameters, and SB3's
-A2C, PPO and DQN with rl-zoo3's, on CartPole-v1 and Acrobot-v1 with the same step budget and seeds; then the tables
-and plots of benchmarks/results/; then the throughput of learn() against A2C's.
+A2C, PPO and DQN with rl-zoo3's, on CartPole-v1 and Acrobot-v1 (and LunarLander-v3 when ``--envs`` names it) with
+the same step budget and seeds; then the tables and plots of benchmarks/results/; then the throughput of learn() against
+A2C's.
 
     python -m benchmarks.run            # the committed results (hours on 2 cores)
     python -m benchmarks.run --quick    # a smoke test of the whole pipeline (minutes), into benchmarks/cache/
@@ -31,6 +32,7 @@ from benchmarks.common import (
     DEFAULT_CACHE_DIR,
     DEFAULT_RESULTS_DIR,
     ENV_IDS,
+    OPTIONAL_ENV_IDS,
     QUICK_RESULTS_DIR,
     check_overridden_settings,
     overrides_from_args,
@@ -76,12 +78,19 @@ class Settings:
 #: The committed results. 200k steps: our algorithms reach the thresholds within 45k (CartPole-v1) and 135k steps
 #: (Acrobot-v1) and every run of ours still has at least 400 episodes; it is 4× DQN's zoo budget on CartPole-v1 (50k)
 #: and 2× on Acrobot-v1 (100k), 2× PPO's on CartPole-v1 (100k); A2C's (500k) and PPO's on Acrobot-v1 (1M) are longer.
-FULL = Settings(seeds=10, peer_seeds=5, budgets=dict.fromkeys(ENV_IDS, 200_000), eval_freq=5_000, eval_episodes=10)
+#: LunarLander-v3 (only when ``--envs`` names it): 500k, between the zoo's budgets there (DQN 100k, A2C 200k, PPO 1M).
+FULL = Settings(
+    seeds=10,
+    peer_seeds=5,
+    budgets={**dict.fromkeys(ENV_IDS, 200_000), "LunarLander-v3": 500_000},
+    eval_freq=5_000,
+    eval_episodes=10,
+)
 #: A smoke test of the pipeline
 QUICK = Settings(
     seeds=2,
     peer_seeds=2,
-    budgets=dict.fromkeys(ENV_IDS, 10_000),
+    budgets=dict.fromkeys(ENV_IDS + OPTIONAL_ENV_IDS, 10_000),
     eval_freq=1_000,
     eval_episodes=5,
     throughput=ThroughputSettings(steps=2_000, repeats=3),
@@ -228,7 +237,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--quick", action="store_true", help="2 seeds, 10k steps, short throughput; results in the scratch folder"
     )
-    parser.add_argument("--envs", nargs="+", choices=ENV_IDS, default=list(ENV_IDS), help="envs to benchmark")
+    parser.add_argument(
+        "--envs",
+        nargs="+",
+        choices=ENV_IDS + OPTIONAL_ENV_IDS,
+        default=list(ENV_IDS),
+        help=f"envs to benchmark (default {' '.join(ENV_IDS)})",
+    )
     parser.add_argument("--algos", nargs="+", choices=ALL_ALGOS, default=list(ALL_ALGOS), help="algorithms to benchmark")
     parser.add_argument("--seeds", type=int_at_least(0), help=f"seeds of REINFORCE and NStepSARSA (default {FULL.seeds})")
     parser.add_argument("--peer-seeds", type=int_at_least(0), help=f"seeds of A2C, PPO and DQN (default {FULL.peer_seeds})")
@@ -237,7 +252,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         nargs="+",
         default=[],
         metavar="[ENV=]STEPS",
-        help="env steps per run, for one env (CartPole-v1=3e5) or all (3e5); default 2e5 on both",
+        help="env steps per run, for one env (CartPole-v1=3e5) or all (3e5); default 2e5, LunarLander-v3 5e5",
     )
     parser.add_argument("--eval-freq", type=positive_int, help=f"env steps between two evaluations (default {FULL.eval_freq})")
     parser.add_argument("--eval-episodes", type=positive_int, help=f"episodes per evaluation (default {FULL.eval_episodes})")

@@ -14,13 +14,15 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import pandas as pd
 import pytest
+import yaml
 from rich.console import Console
 
 from benchmarks import hot_paths, masking, per_step_speed, textbook
-from benchmarks.common import REPO_ROOT, parse_overrides
+from benchmarks.common import ENV_IDS, OPTIONAL_ENV_IDS, REPO_ROOT, THRESHOLDS, parse_overrides
 from benchmarks.report import (
     Results,
     episode_curves,
@@ -42,7 +44,7 @@ from benchmarks.throughput import (
 from benchmarks.throughput import main as throughput_main
 from sb3_classic import NStepSARSA
 from sb3_classic.harness import pool, runner
-from sb3_classic.harness.common import RunSpec, code_versions, register_algorithms
+from sb3_classic.harness.common import ALL_ALGOS, RunSpec, code_versions, hyperparams_path, register_algorithms
 from sb3_classic.harness.runner import RUN_FILE, episodes_from_monitors, run_one
 from sb3_classic.sarsa.policies import LinearQPolicy
 
@@ -247,6 +249,19 @@ def test_parse_budgets() -> None:
         parse_budgets(["CartPole-v1=lots"], envs, defaults)
 
 
+def test_lunar_lander_is_benchmarked_when_named() -> None:
+    # The default envs stay those of the committed benchmark; LunarLander-v3 runs with its own budget, Gymnasium's
+    # "solved" threshold, and each algorithm's own entry there (not the default entry of our YAMLs)
+    assert ENV_IDS == ("CartPole-v1", "Acrobot-v1")
+    assert "LunarLander-v3" in OPTIONAL_ENV_IDS
+    assert THRESHOLDS["LunarLander-v3"] == gym.spec("LunarLander-v3").reward_threshold == 200
+    specs = make_specs(FULL, ["LunarLander-v3"], ALL_ALGOS, lockstep=False)
+    assert {spec.n_timesteps for spec in specs} == {FULL.budgets["LunarLander-v3"]} == {500_000}
+    for algo in ALL_ALGOS:
+        entry = yaml.safe_load(hyperparams_path(algo).read_text())["LunarLander-v3"]
+        assert all(spec.hyperparams == entry for spec in specs if spec.algo == algo), algo
+
+
 def test_make_specs_share_budgets_and_seeds() -> None:
     specs = make_specs(FULL, ["CartPole-v1", "Acrobot-v1"], ["reinforce", "nstep_sarsa", "a2c", "ppo", "dqn"])
     seeds = {
@@ -342,6 +357,8 @@ def test_throughput_set_needs_a_results_dir(capsys: pytest.CaptureFixture[str]) 
         (main, ["--eval-freq", "0"], "--eval-freq: '0'"),
         (main, ["--workers", "0"], "--workers: '0'"),
         (main, ["--budget", "CartPol-v1=100"], "'CartPol-v1' is not one of the envs benchmarked"),
+        # --envs accepts LunarLander-v3, and then the budgets are those of the envs named
+        (main, ["--envs", "LunarLander-v3", "--budget", "Acrobot-v1=100"], "not one of the envs benchmarked (LunarLander-v3)"),
         (textbook.main, ["--runs", "7.3=4"], "'7.3' is not one of the figures"),
         (textbook.main, ["--workers", "0"], "--workers: '0'"),
         (per_step_speed.main, ["--repeats", "zero"], "--repeats: 'zero' is not an integer >= 1"),

@@ -26,9 +26,9 @@ import yaml
 import sb3_classic
 from sb3_classic import zoo
 
-#: The reward threshold an evaluation's mean return must reach (Gymnasium's ``reward_threshold`` for CartPole-v1;
-#: the customary one for Acrobot-v1, whose spec has ``reward_threshold=-100.0``)
-THRESHOLDS = {"CartPole-v1": 475.0, "Acrobot-v1": -100.0}
+#: The reward threshold an evaluation's mean return must reach (Gymnasium's ``reward_threshold`` for CartPole-v1 and
+#: LunarLander-v3, its "solved" level; the customary one for Acrobot-v1, whose spec has ``reward_threshold=-100.0``)
+THRESHOLDS = {"CartPole-v1": 475.0, "Acrobot-v1": -100.0, "LunarLander-v3": 200.0}
 OUR_ALGOS = ("reinforce", "nstep_sarsa")
 PEER_ALGOS = ("a2c", "ppo", "dqn")
 ALL_ALGOS = OUR_ALGOS + PEER_ALGOS
