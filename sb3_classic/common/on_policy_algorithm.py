@@ -299,7 +299,9 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
             th.nn.utils.clip_grad_norm_(parameters, self.max_grad_norm)
 
     @abstractmethod
-    def _sample_actions(self, obs: np.ndarray | dict[str, np.ndarray], action_masks: np.ndarray | None = None) -> np.ndarray:
+    def _sample_actions(
+        self, obs: np.ndarray | dict[str, np.ndarray], action_masks: np.ndarray | None = None, behaviour: Any = None
+    ) -> np.ndarray:
         """
         The behaviour policy of the per-step loop: one action per env, as a NumPy array the env accepts. Called
         without gradient (``th.no_grad``).
@@ -307,6 +309,9 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
         :param obs: the current observations of all envs, as the VecEnv returned them
         :param action_masks: their action masks, shape (n_envs, mask_size), boolean, each allowing some action;
             None when masking is off
+        :param behaviour: what the behaviour policy's forward pass gives for ``obs``, computed outside the model (a
+            population's stacked pass: NStepSARSA's q̂(S, ·), REINFORCE's logits and their soft-max); None: the
+            model's own forward pass
         """
 
     def _read_action_masks(self, env: VecEnv) -> np.ndarray:
@@ -409,6 +414,26 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
             SARSA)
         :return: False if the callback stopped training
         """
+        rollout = self._rollout(env, callback, rollout_buffer, n_rollout_steps)
+        try:
+            next(rollout)
+            while True:
+                rollout.send(None)
+        except StopIteration as end:
+            return bool(end.value)
+
+    def _rollout(
+        self,
+        env: VecEnv,
+        callback: BaseCallback,
+        rollout_buffer: TrajectoryBuffer,
+        n_rollout_steps: int | None = None,
+    ) -> Generator[None, Any, bool]:
+        """
+        ``collect_rollouts``, one env step per ``send``: before each step it waits to be sent what the behaviour
+        policy's forward pass gives for the current observations (a population's stacked pass; None: the model makes
+        its own, as ``collect_rollouts`` does), and it returns ``collect_rollouts``' value.
+        """
         assert self._last_obs is not None, "No previous observation was provided"
         self._start_rollout(callback)
         n_steps, n_episodes = 0, 0
@@ -418,7 +443,8 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
                     break
             elif n_steps >= n_rollout_steps:
                 break
-            continue_training, n_ended = self._rollout_step(env, callback, rollout_buffer, n_steps, n_episodes)
+            behaviour = yield
+            continue_training, n_ended = self._rollout_step(env, callback, rollout_buffer, n_steps, n_episodes, behaviour)
             n_steps += 1
             n_episodes += n_ended
             if not continue_training:
@@ -440,7 +466,13 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
         callback.on_rollout_start()
 
     def _rollout_step(
-        self, env: VecEnv, callback: BaseCallback, rollout_buffer: TrajectoryBuffer, n_steps: int, n_episodes: int
+        self,
+        env: VecEnv,
+        callback: BaseCallback,
+        rollout_buffer: TrajectoryBuffer,
+        n_steps: int,
+        n_episodes: int,
+        behaviour: Any = None,
     ) -> tuple[bool, int]:
         """
         One step of ``collect_rollouts``: an action per env from the behaviour policy, the envs' step, the callback's
@@ -451,6 +483,8 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
         :param rollout_buffer: buffer to fill
         :param n_steps: steps per env taken in this rollout before this one (the callback's ``locals``, as SB3's)
         :param n_episodes: episodes ended in this rollout before this step (the callback's ``locals``)
+        :param behaviour: what the behaviour policy's forward pass gives for the current observations, computed outside
+            the model (a population's stacked pass); None: the model's own forward pass
         :return: False if the callback stopped training, and the episodes this step ended (all envs together)
         :raises ValueError: if the envs returned NaN or ±inf (nothing of the step is stored)
         """
@@ -459,7 +493,7 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
             # Read before the action is chosen, as sb3-contrib's MaskablePPO reads them
             action_masks = self._read_action_masks(env)
         with th.no_grad():
-            actions = self._sample_actions(self._last_obs, action_masks)  # type: ignore[arg-type]
+            actions = self._sample_actions(self._last_obs, action_masks, behaviour)  # type: ignore[arg-type]
         env_actions = actions
         if self._action_offset is not None:
             # The buffer and the networks use indices 0..n-1, the env its own values start..start+n-1

@@ -4,7 +4,7 @@ setting trained in lockstep): the checks of their members, each member's generat
 member stacked with its Adam state (``StackedPart``), and the end of ``learn`` for each member.
 """
 
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any, Generic, Literal, Protocol, TypeVar, cast
 
@@ -343,56 +343,6 @@ class StackedPart:
                 }
 
 
-class MemberRollout:
-    """
-    A member's rollout loop (``ClassicOnPolicyAlgorithm.collect_rollouts``), one env step at a time, so that a
-    population can choose every member's actions from one stacked forward pass (the caller hands the member its slice,
-    ``Trainer.hand``, before each step): the member's own ``_start_rollout`` and ``_rollout_step``
-    (its behaviour policy's draws, its env and Monitor, ``num_timesteps``, its callback's ``on_step``, the checks for NaN
-    and ±inf, the buffer, the episode counts), and the rollout's end as ``collect_rollouts`` ends it.
-
-    :param model: the member
-    :param callback: its callback, as ``_setup_learn`` made it
-    """
-
-    def __init__(self, model: Any, callback: BaseCallback) -> None:
-        self.model = model
-        self.callback = callback
-        #: whether a rollout is under way, and its env steps (per env) and episodes so far
-        self.running = False
-        self.n_steps = self.n_episodes = 0
-
-    def step(self) -> bool | None:
-        """
-        One env step of the member's rollout (its start first, if none is under way), and its end if it is complete.
-
-        :return: whether the rollout is complete (the update's turn); None if the callback stopped training
-        :raises ValueError: the member's own error for a non-finite reward or observation
-        """
-        model, callback = self.model, self.callback
-        if not self.running:
-            model._start_rollout(callback)
-            self.running, self.n_steps, self.n_episodes = True, 0, 0
-        try:
-            continue_training, n_ended = model._rollout_step(
-                model.env, callback, model.rollout_buffer, self.n_steps, self.n_episodes
-            )
-        except ValueError:
-            self.running = False
-            raise
-        self.n_steps += 1
-        self.n_episodes += n_ended
-        if not continue_training:
-            self.running = False
-            return None
-        if not model._rollout_complete(self.n_steps, self.n_episodes):
-            return False
-        callback.update_locals(dict(n_steps=self.n_steps, n_episodes=self.n_episodes))
-        callback.on_rollout_end()
-        self.running = False
-        return True
-
-
 class Trainer(Protocol):
     """
     An algorithm's stacked networks during one ``learn`` of its population (``NStepSARSAPopulation``'s q̂ and its
@@ -405,10 +355,10 @@ class Trainer(Protocol):
     steps_again: bool
 
     def forward(self) -> Any:
-        """:return: what chooses every member's actions at this env step (one stacked forward pass)"""
-
-    def hand(self, model: Any, outputs: Any, k: int) -> None:
-        """Give member ``k`` its part of ``forward``'s ``outputs`` for its next env step (None: take it back)."""
+        """
+        :return: what chooses each member's actions at this env step, indexed by member (one stacked forward pass), as
+            its model's ``_sample_actions`` takes it (``behaviour``)
+        """
 
     def step(self, updates: dict[int, "MemberUpdate"]) -> list[int]:
         """
@@ -574,7 +524,9 @@ class Lockstep:
         self.stopped: set[int] = set()
         #: each member's rollouts so far (``time/iterations``)
         self.iterations = [0] * len(models)
-        self.rollouts = [MemberRollout(model, callback) for model, callback in zip(models, callbacks, strict=True)]
+        self.callbacks = callbacks
+        #: each member's rollout under way (its ``_rollout()``), None between two
+        self.rollouts: list[Generator[None, Any, bool] | None] = [None] * len(models)
         #: the updates in progress, by member
         self.updates: dict[int, MemberUpdate] = {}
 
@@ -586,7 +538,7 @@ class Lockstep:
                 for k, model in enumerate(self.models)
                 if k not in self.stopped
                 and k not in self.updates
-                and (self.rollouts[k].running or model.num_timesteps < self.totals[k])
+                and (self.rollouts[k] is not None or model.num_timesteps < self.totals[k])
             ]
             if not stepping and not self.updates:
                 return
@@ -599,27 +551,31 @@ class Lockstep:
 
     def _step(self, k: int, outputs: Any) -> bool:
         """
-        Member k's env step, and the end of its rollout and the start of its update when the rollout is complete (the
+        Member k's env step (its own ``_rollout``: ``collect_rollouts`` one step at a time, its actions chosen from
+        ``outputs[k]``), and the end of its rollout and the start of its update when the rollout is complete (the
         algorithm's ``learn`` loop after ``collect_rollouts``).
 
         :param k: the member
         :param outputs: ``Trainer.forward``'s
         :return: whether it takes another env step before the next stacked gradient step (``Trainer.steps_again``)
         """
-        model = self.models[k]
-        self.trainer.hand(model, outputs, k)
+        model, rollout = self.models[k], self.rollouts[k]
         try:
-            complete = self.rollouts[k].step()
+            if rollout is None:
+                rollout = self.rollouts[k] = model._rollout(model.env, self.callbacks[k], model.rollout_buffer)
+                next(rollout)
+            rollout.send(outputs[k])
+        except StopIteration as end:
+            self.rollouts[k] = None
+            if not end.value:  # (the callback stopped training)
+                self.stopped.add(k)
+                return False
         except ValueError as error:
+            self.rollouts[k] = None
             self.errors[k] = error
             self.stopped.add(k)
             return False
-        finally:
-            self.trainer.hand(model, None, k)
-        if complete is None:  # (the callback stopped training)
-            self.stopped.add(k)
-            return False
-        if not complete:
+        else:
             return self.trainer.steps_again
         self.iterations[k] += 1
         model._update_current_progress_remaining(model.num_timesteps, self.totals[k])

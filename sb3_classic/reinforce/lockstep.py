@@ -101,21 +101,18 @@ class _StackedPolicy:
         #: every member's current observations, flattened, refilled at each env step (one array, no stacking)
         self._observations = np.zeros((len(models), first.n_envs, self.features), dtype=np.float32)
 
-    def forward(self) -> tuple[np.ndarray, np.ndarray]:
+    def forward(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """
-        :return: h(S, ·, θ) of every member's current observations, one stacked forward pass, shape
-            (K, n_envs, n_actions), and the cumulative probabilities of their soft-max (``softmax_cdf``), the same shape
+        :return: by member, h(S, ·, θ) of its current observations, shape (n_envs, n_actions), and the cumulative
+            probabilities of their soft-max (``softmax_cdf``), the same shape (one stacked forward pass, one soft-max
+            of all members): what its draw takes in place of a forward pass of its own
         """
         observations = self._observations
         for k, model in enumerate(self.models):
             observations[k] = np.reshape(model._last_obs, observations.shape[1:])  # type: ignore[arg-type]
         with th.no_grad():
             logits = self.policy.stacked(th.as_tensor(observations, device=self.device)).cpu().numpy()
-        return logits, softmax_cdf(logits)
-
-    def hand(self, model: REINFORCE, outputs: tuple[np.ndarray, np.ndarray] | None, k: int) -> None:
-        """Member k's logits and their soft-max for its next draw, in place of a forward pass of its own (None: none)."""
-        model._next_logits, model._next_cdf = (None, None) if outputs is None else (outputs[0][k], outputs[1][k])
+        return list(zip(logits, softmax_cdf(logits), strict=True))
 
     def step(self, updates: dict[int, MemberUpdate]) -> list[int]:
         """

@@ -298,11 +298,6 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         self.ent_coef = ent_coef
         # The generator of the rollouts' action draws; None: torch's global one (``multinomial``), seeded by SB3
         self._action_rng: np.random.Generator | None = None
-        # π's logits of the current observations and their cumulative probabilities (softmax_cdf) computed outside the
-        # model (from a population's stacked forward pass, reinforce/lockstep.py), taken by the next _sample_actions in
-        # place of a forward pass of its own
-        self._next_logits: np.ndarray | None = None
-        self._next_cdf: np.ndarray | None = None
         if _init_setup_model:
             self._setup_model()  # (which checks the arguments first)
 
@@ -333,9 +328,14 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             **self.policy_kwargs,
         )
 
-    def _sample_actions(self, obs: np.ndarray | dict[str, np.ndarray], action_masks: np.ndarray | None = None) -> np.ndarray:
+    def _sample_actions(
+        self,
+        obs: np.ndarray | dict[str, np.ndarray],
+        action_masks: np.ndarray | None = None,
+        behaviour: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> np.ndarray:
         if self._action_rng is not None:
-            return self._draw_actions(obs, action_masks)
+            return self._draw_actions(obs, action_masks, behaviour)
         # A ~ π(·|S, θ) over the legal actions; the baseline v̂ is only needed at update time
         actions = self.policy.sample_actions(obs_as_tensor(obs, self.device), action_masks).cpu().numpy()
         if isinstance(self.action_space, spaces.Box):
@@ -344,15 +344,21 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             actions = actions.reshape((-1, *self.action_space.shape))
         return actions
 
-    def _draw_actions(self, obs: np.ndarray | dict[str, np.ndarray], action_masks: np.ndarray | None) -> np.ndarray:
+    def _draw_actions(
+        self,
+        obs: np.ndarray | dict[str, np.ndarray],
+        action_masks: np.ndarray | None,
+        behaviour: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> np.ndarray:
         """
         ``_sample_actions`` with ``_action_rng`` set: A ~ π(·|S, θ) by the inverse CDF of the soft-max of the logits
         (``categorical_inverse_cdf``), one uniform draw of ``_action_rng`` per env, an illegal action (masks) at
-        probability 0. The logits and their cumulative probabilities are those the population computed
-        (``_next_logits``, ``_next_cdf``, taken once) or those of the policy's forward pass.
+        probability 0.
 
         :param obs: the current observations of all envs
         :param action_masks: the legal actions of each env, shape (n_envs, n_actions); None: all legal
+        :param behaviour: the logits of ``obs`` and their cumulative probabilities (``softmax_cdf``), computed outside
+            the model (a population's stacked forward pass); None: the policy's forward pass
         :return: one action index per env, shape (n_envs,)
         :raises ValueError: for actions other than Discrete, or a policy with its own forward or distribution
         """
@@ -361,10 +367,10 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
                 f"_action_rng draws Discrete actions from the soft-max of REINFORCEPolicy's logits, not {self.action_space} "
                 f"actions of a {type(self.policy).__name__}: set model._action_rng = None"
             )
-        logits, cdf = self._next_logits, self._next_cdf
-        self._next_logits = self._next_cdf = None
-        if logits is None:
-            logits = self.policy.action_logits(obs_as_tensor(obs, self.device)).cpu().numpy()
+        if behaviour is None:
+            logits, cdf = self.policy.action_logits(obs_as_tensor(obs, self.device)).cpu().numpy(), None
+        else:
+            logits, cdf = behaviour
         if action_masks is not None and not action_masks.all():
             # h(s, a) = −∞ for an illegal a: e^{h} = 0 in the soft-max (S&B eq. 13.2)
             cdf = softmax_cdf(np.where(action_masks, logits, -np.inf))
@@ -586,7 +592,7 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
 
     def _excluded_save_params(self) -> list[str]:
         # A population's generator and probabilities (they are the population's): not training state
-        return [*super()._excluded_save_params(), "_action_rng", "_next_cdf", "_next_logits"]
+        return [*super()._excluded_save_params(), "_action_rng"]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         optimizers = ["policy.optimizer"] + (["policy.value_optimizer"] if self.use_baseline else [])

@@ -85,14 +85,13 @@ class _StackedQ:
         self.huber = models[0].loss_function == "huber"
 
     def forward(self) -> np.ndarray:
-        """:return: q̂(S, ·) of every member's current observations, one stacked forward pass, (K, n_envs, n_actions)"""
+        """
+        :return: q̂(S, ·) of every member's current observations, one stacked forward pass, shape (K, n_envs, n_actions):
+            member k's ε-greedy choice takes row k in place of a forward pass of its own
+        """
         observations = np.stack([np.asarray(model._last_obs) for model in self.models])
         x = th.as_tensor(observations, device=self.device).float()
         return self.stacked.inference(x.reshape(*x.shape[:2], -1)).cpu().numpy()
-
-    def hand(self, model: NStepSARSA, outputs: np.ndarray | None, k: int) -> None:
-        """Member k's q̂(S, ·) for its next ε-greedy choice, in place of a forward pass of its own (None: none)."""
-        model._next_q_values = None if outputs is None else outputs[k]
 
     def step(self, updates: dict[int, MemberUpdate]) -> list[int]:
         """

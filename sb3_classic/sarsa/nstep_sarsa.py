@@ -283,9 +283,6 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self.exploration_rate = exploration_initial_eps
         # q̂(S, ·) of the rollout loop's last step, the update count and the env steps when it was computed
         self._rollout_q_values = RolloutQValues(np.zeros(0), -1, -1)
-        # q̂(S, ·) of the current observations computed outside the model (a population's stacked forward pass,
-        # sarsa/lockstep.py), taken by the next _sample_actions in place of a forward pass of its own
-        self._next_q_values: np.ndarray | None = None
         # The generator of the behaviour policy's draws (ε and ties); None: NumPy's global one, seeded by SB3
         self._action_rng: np.random.Generator | None = None
         if _init_setup_model:
@@ -371,44 +368,35 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         uniform = np.random.randint(first_action, stop, size=shape) if rng is None else rng.integers(first_action, stop, shape)
         return np.where(explore, uniform, greedy_actions)
 
-    def _sample_actions(self, obs: np.ndarray | dict[str, np.ndarray], action_masks: np.ndarray | None = None) -> np.ndarray:
+    def _sample_actions(
+        self,
+        obs: np.ndarray | dict[str, np.ndarray],
+        action_masks: np.ndarray | None = None,
+        behaviour: np.ndarray | None = None,
+    ) -> np.ndarray:
         if action_masks is not None:
-            return self._sample_masked_actions(obs, action_masks)
+            # argmax over the legal actions: the illegal ones at −∞ (a policy's own _predict is not asked: the env's
+            # masks say what is legal)
+            q_masked = np.where(action_masks, self._behaviour_q_values(obs, behaviour), -np.inf)
+            return self._epsilon_greedy(greedy_random_ties(q_masked, self._action_rng), action_masks=action_masks)
         if self.policy.own_predict:
             # A subclass's greedy policy (action masking, say), as SB3's DQN's ε-greedy takes its policy's predict
             greedy = self.policy._predict(obs_as_tensor(obs, self.device), deterministic=False)
             return self._epsilon_greedy(greedy.cpu().numpy().reshape(-1))
-        q_values = self._behaviour_q_values(obs)
-        return self._epsilon_greedy(greedy_random_ties(q_values, self._action_rng))
+        return self._epsilon_greedy(greedy_random_ties(self._behaviour_q_values(obs, behaviour), self._action_rng))
 
-    def _behaviour_q_values(self, obs: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
+    def _behaviour_q_values(self, obs: np.ndarray | dict[str, np.ndarray], q_values: np.ndarray | None) -> np.ndarray:
         """
         :param obs: the current observations of all envs
-        :return: q̂(S, ·) of them, shape (n_envs, n_actions): those a population computed for this step
-            (``_next_q_values``, taken once), else q̂'s forward pass; kept in the per-step mode for the bootstrap of the
-            next update, if no update comes in between (see ``_values_at``)
+        :param q_values: q̂(S, ·) of them computed outside the model (a population's stacked forward pass), or None
+        :return: q̂(S, ·) of them, shape (n_envs, n_actions): ``q_values``, else q̂'s forward pass; kept in the
+            per-step mode for the bootstrap of the next update, if no update comes in between (see ``_values_at``)
         """
-        q_values = self._next_q_values
         if q_values is None:
             q_values = self.policy.q_values(obs)
-        else:
-            self._next_q_values = None
         if self.update_mode == "per_step":
             self._rollout_q_values = RolloutQValues(q_values, self._n_updates, self.num_timesteps)
         return q_values
-
-    def _sample_masked_actions(self, obs: np.ndarray | dict[str, np.ndarray], action_masks: np.ndarray) -> np.ndarray:
-        """
-        ``_sample_actions`` with masks: ε-greedy over the legal actions of each env, greedy in q̂ (a policy's own
-        ``_predict`` is not asked: the env's masks say what is legal).
-
-        :param obs: the current observations of all envs
-        :param action_masks: their legal actions, shape (n_envs, n_actions)
-        :return: one action index per env
-        """
-        # argmax over the legal actions: the illegal ones at −∞
-        greedy = greedy_random_ties(np.where(action_masks, self._behaviour_q_values(obs), -np.inf), self._action_rng)
-        return self._epsilon_greedy(greedy, action_masks=action_masks)
 
     def _rollout_complete(self, n_steps: int, n_episodes: int) -> bool:
         return n_steps >= self.train_freq
@@ -662,7 +650,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     def _excluded_save_params(self) -> list[str]:
         # Caches of the rollout loop's forward passes, and a population's generator (it is the population's): not training
         # state
-        return [*super()._excluded_save_params(), "_rollout_q_values", "_next_q_values", "_action_rng"]
+        return [*super()._excluded_save_params(), "_rollout_q_values", "_action_rng"]
 
     def learn(
         self: SelfNStepSARSA,
