@@ -55,10 +55,23 @@ def load_results(specs: Sequence[RunSpec], cache_dir: Path) -> Results:
         evaluations.append(load_run_table(run_dir, EVALUATIONS_FILE).assign(**labels))
     return Results(
         runs=pd.DataFrame(runs, columns=[*RUN_COLUMNS, *SUMMARY_COLUMNS]),
-        episodes=pd.concat(episodes, ignore_index=True) if episodes else pd.DataFrame(columns=RUN_COLUMNS),
-        evaluations=pd.concat(evaluations, ignore_index=True) if evaluations else pd.DataFrame(columns=RUN_COLUMNS),
+        episodes=_stack(episodes),
+        evaluations=_stack(evaluations),
         missing=missing,
     )
+
+
+def _stack(tables: list[pd.DataFrame]) -> pd.DataFrame:
+    """
+    :param tables: one table of each run (its episodes or its evaluations), labelled with the run
+    :return: their rows in one table. A run with no rows (a run whose envs ended no episode in its budget) adds none:
+        its table, read from a header-only CSV, has object-typed columns, which would make every column of the
+        concatenation object-typed (pandas counts empty tables in the result's dtypes), and the plots fail on them.
+        If every table is empty, the first one (for its columns).
+    """
+    if not tables:
+        return pd.DataFrame(columns=RUN_COLUMNS)
+    return pd.concat([table for table in tables if len(table)] or tables[:1], ignore_index=True)
 
 
 def evaluation_means(evaluations: pd.DataFrame) -> pd.DataFrame:

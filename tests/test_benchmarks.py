@@ -24,14 +24,17 @@ from rich.console import Console
 from benchmarks import hot_paths, masking, per_step_speed, textbook
 from benchmarks.common import ENV_IDS, OPTIONAL_ENV_IDS, REPO_ROOT, THRESHOLDS, parse_overrides
 from benchmarks.report import (
+    RUN_COLUMNS,
     Results,
     episode_curves,
     episodes_by,
     first_crossing,
+    load_results,
     stability,
     stayed_counts,
     summary_table,
     threshold_crossings,
+    write_learning_report,
 )
 from benchmarks.run import FULL, QUICK, learning_header, main, make_specs, parse_budgets
 from benchmarks.throughput import (
@@ -45,7 +48,7 @@ from benchmarks.throughput import main as throughput_main
 from sb3_classic import NStepSARSA
 from sb3_classic.harness import pool, runner
 from sb3_classic.harness.common import ALL_ALGOS, RunSpec, code_versions, hyperparams_path, register_algorithms
-from sb3_classic.harness.runner import RUN_FILE, episodes_from_monitors, run_one
+from sb3_classic.harness.runner import EPISODES_FILE, EVALUATIONS_FILE, RUN_FILE, episodes_from_monitors, run_one
 from sb3_classic.sarsa.policies import LinearQPolicy
 
 SPEC = RunSpec(
@@ -195,6 +198,48 @@ def test_summary_table_stability_columns() -> None:
     assert row["Final ≥ 475"] == "1/3"
     # Only seed 0 has evaluations after its first at 475 (one, at 400)
     assert row["Stayed"] == "0% (worst seed 0%)"
+
+
+def cache_run(
+    cache_dir: Path, spec: RunSpec, summary: dict[str, Any], episodes: pd.DataFrame, evaluations: pd.DataFrame
+) -> None:
+    """Write a finished run's files into the cache, as the runner does (the tables without the run's labels)."""
+    run_dir = spec.run_dir(cache_dir)
+    run_dir.mkdir(parents=True)
+    (run_dir / RUN_FILE).write_text(json.dumps(summary))
+    episodes.drop(columns=RUN_COLUMNS).to_csv(run_dir / EPISODES_FILE, index=False)
+    evaluations.drop(columns=RUN_COLUMNS).to_csv(run_dir / EVALUATIONS_FILE, index=False)
+
+
+def test_a_run_that_ended_no_episode_is_reported_as_one_with_none(tmp_path: Path) -> None:
+    # NStepSARSA's 8 Acrobot-v1 envs end no episode in a budget of 2,000 steps: the run's episodes.csv is a header only,
+    # read back with object-typed columns, which made the columns of all the runs' episodes object-typed and the
+    # episode plot fail (TypeError in fill_between)
+    synthetic = synthetic_results()
+    specs = [dataclasses.replace(SPEC, seed=seed) for seed in (0, 1, 2)]
+    for spec in specs:
+        summary = json.loads(synthetic.runs[synthetic.runs["seed"] == spec.seed].iloc[0].to_json())
+        episodes, evaluations = (table[table["seed"] == spec.seed] for table in (synthetic.episodes, synthetic.evaluations))
+        cache_run(tmp_path / "cache", spec, summary, episodes, evaluations)
+    # An NStepSARSA run that evaluates as REINFORCE's seed 2 (never at the threshold) and ended no episode
+    no_episode = dataclasses.replace(SPEC, algo="nstep_sarsa", seed=2)
+    summary = {**json.loads(synthetic.runs.iloc[2].to_json()), "algo": "nstep_sarsa", "n_episodes": 0}
+    evaluations = synthetic.evaluations[synthetic.evaluations["seed"] == 2]
+    cache_run(tmp_path / "cache", no_episode, summary, synthetic.episodes.iloc[:0], evaluations)
+
+    results = load_results([*specs, no_episode], tmp_path / "cache")
+    assert results.episodes.dtypes[["episode", "return", "end_step"]].tolist() == ["int64", "float64", "int64"]
+    assert (results.episodes["algo"] == "reinforce").all()
+    path = write_learning_report(results, ["CartPole-v1"], ["reinforce", "nstep_sarsa"], "# Learning", tmp_path / "results")
+    rows = {row[0]: row for row in (line.split(" | ") for line in path.read_text().splitlines() if line.startswith("| "))}
+    # REINFORCE's row as from its runs alone (test_summary_table); NStepSARSA's as a run that never reached 475
+    assert rows["| REINFORCE"][4:9] == ["2/3", "2/3", "100% (worst seed 100%)", "2,500 (2,000–3,000)", "7 (6–8)"]
+    assert rows["| NStepSARSA"][1:10] == ["1", "1", "40.0 ± 0.0", "0/1", "0/1", "–", "–", "–", "0 (0–0)"]
+    for name in ("CartPole-v1-episodes.png", "CartPole-v1-steps.png"):
+        assert (tmp_path / "results" / name).stat().st_size > 0
+    per_run = pd.read_csv(tmp_path / "results" / "learning-runs.csv").set_index("algo")
+    assert per_run.loc["nstep_sarsa", "n_episodes"] == 0
+    assert np.isnan(per_run.loc["nstep_sarsa", "episodes_to_threshold"])
 
 
 def test_run_key_covers_what_changes_the_result(tmp_path: Path) -> None:
