@@ -63,6 +63,10 @@ def test_learn_and_predict(model_class: type[BaseAlgorithm]) -> None:
     model = make_model(model_class, seed=0).learn(300)
     assert isinstance(model, OnPolicyAlgorithm)
     assert model.num_timesteps >= 300
+    # train() with nothing left to train (SB3's public method, called by a user) changes nothing
+    before = [p.detach().clone() for p in model.policy.parameters()]
+    model.train()
+    assert all(th.equal(a, b) for a, b in zip(before, model.policy.parameters(), strict=True))
     obs = observations()
     for deterministic in (True, False):
         actions, state = model.predict(obs, deterministic=deterministic)

@@ -369,6 +369,17 @@ def test_members_of_different_settings_are_refused() -> None:
         NStepSARSAPopulation([NStepSARSA("MlpPolicy", "CartPole-v1", **SETTING)])
 
 
+def test_a_bad_use_masking_is_refused_before_anything_changes() -> None:
+    members = [make_member(seed) for seed in (0, 1)]
+    with pytest.raises(TypeError, match="use_masking"):
+        NStepSARSAPopulation(members).learn(100, use_masking=None)  # type: ignore[arg-type]
+    for member in members:
+        assert member.num_timesteps == 0
+        assert member._action_rng is None
+        # (its own parameters, no view into a stack)
+        assert all(p.is_contiguous() and p.untyped_storage().nbytes() == p.numel() * 4 for p in member.policy.parameters())
+
+
 def test_a_member_is_saved_after_learn_not_during_it(tmp_path: Path) -> None:
     """While the population trains, a member's Adam state is the population's: a save then is refused, not stale."""
     from stable_baselines3.common.callbacks import CheckpointCallback

@@ -20,7 +20,7 @@ from sb3_classic.common.arguments import constructor_parameters
 from sb3_classic.common.on_policy_algorithm import Update
 from sb3_classic.common.stacked import StackedAdam, StackedMLP, parametrized_layers
 from sb3_classic.common.threads import one_thread_unless_chosen
-from sb3_classic.common.utils import check_positive_int
+from sb3_classic.common.utils import check_bool, check_positive_int
 
 #: The remaining progress at which two schedules are compared (``same_setting``)
 SCHEDULE_PROBES = (1.0, 0.75, 0.5, 0.25, 0.0)
@@ -42,7 +42,8 @@ def shared_settings(algorithm: type[BaseAlgorithm]) -> tuple[str, ...]:
 
 class MemberError(ValueError):
     """
-    Members of a population stopped by an error of their own (their env's NaN), the others trained to the end.
+    Members of a population stopped by an error of their own in an env step (their env's NaN or ±inf, a mask that
+    allows no action, a ``ValueError`` of their callback's ``on_step``), the others trained to the end.
 
     :param message: what happened, naming the members
     :param member_errors: each stopped member's error, by member index
@@ -182,13 +183,13 @@ def trained_together(
     :param rngs: their generators (``member_rng``)
     :param use_masking: the population's ``learn``'s
     """
-    for model, rng in zip(models, rngs, strict=True):
-        model._action_rng = rng
-        model._setup_masking(use_masking)
-        # A member's optimizers are not stepped while the population trains it (the StackedAdams are): a file saved
-        # now would hold a stale Adam state, so saving waits until learn returns
-        model.__dict__["save"] = refusing_save(population)
     try:
+        for model, rng in zip(models, rngs, strict=True):
+            model._action_rng = rng
+            model._setup_masking(use_masking)
+            # A member's optimizers are not stepped while the population trains it (the StackedAdams are): a file
+            # saved now would hold a stale Adam state, so saving waits until learn returns
+            model.__dict__["save"] = refusing_save(population)
         with one_thread_unless_chosen(models[0].device):
             yield
     finally:
@@ -480,10 +481,13 @@ class Population(Generic[ModelT]):
         :param use_masking: the algorithm's ``learn``'s: each member whose env has action masks (``action_masks()``,
             as sb3-contrib's ``ActionMasker`` gives) chooses among its legal actions
         :return: the members, trained
-        :raises MemberError: if a member's env returned NaN or ±inf (the member's usual error, with the member named):
-            that member stops as its last update left it, the others train to the end first
+        :raises MemberError: if a member's env step raised its usual ``ValueError`` (its env's NaN or ±inf, a mask
+            that allows no action), with the member named: that member stops as its last update left it, the others
+            train to the end first
+        :raises TypeError: for a ``use_masking`` that is not a bool, before anything is trained
         """
         models, name = self.models, type(self).__name__
+        check_bool("use_masking", use_masking)
         if log_interval == "auto":
             log_interval = self._log_interval()
         if log_interval is not None:
@@ -491,8 +495,8 @@ class Population(Generic[ModelT]):
             check_positive_int("log_interval", log_interval, hint=hint)
         tb_log_name = type(models[0]).__name__ if tb_log_name is None else tb_log_name
         totals, member_callbacks = start_learn(models, callback, total_timesteps, reset_num_timesteps, tb_log_name)
-        run = Lockstep(models, member_callbacks, totals, log_interval, self._trainer())
         with trained_together(name, models, self.action_rngs, use_masking):
+            run = Lockstep(models, member_callbacks, totals, log_interval, self._trainer())
             try:
                 run.run()
             finally:

@@ -388,6 +388,8 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             (None if no episode has ended)
         """
         data = self.rollout_buffer.get()
+        if len(data.dones) == 0:  # (train() called with nothing stored)
+            return None
         # An env's pending steps up to its last episode end form complete episodes; the rest is still running
         steps = np.arange(len(data.dones))[:, None]
         last_end = np.where(data.dones, steps, -1).max(axis=0)
