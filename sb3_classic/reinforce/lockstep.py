@@ -139,11 +139,11 @@ class _StackedPolicy:
         for row, (observations, member_actions, member_returns, steps, member_masks) in enumerate(chunks):
             n = lengths[row]
             if masks is not None and member_masks is not None:
-                masks[row, :n] = member_masks.reshape(n, -1).cpu().numpy()
-            x[row, :n] = observations.reshape(n, -1).cpu().numpy()
-            actions[row, :n] = member_actions.reshape(n).cpu().numpy()
-            returns[row, :n] = member_returns.cpu().numpy()
-            episode_steps[row, :n] = steps.cpu().numpy()
+                masks[row, :n] = np.reshape(member_masks, (n, -1))
+            x[row, :n] = np.reshape(observations, (n, -1))
+            actions[row, :n] = np.reshape(member_actions, n)
+            returns[row, :n] = member_returns
+            episode_steps[row, :n] = steps
         # α^θ and α^w of each member's update (set by its _update)
         policy_lrs, value_lrs = np.zeros(len(self.models)), np.zeros(len(self.models))
         for k in members:
@@ -157,10 +157,10 @@ class _StackedPolicy:
         for row, k in enumerate(members):
             # (what the member's _gradient_step returns)
             result = dict(
-                policy_loss=th.tensor(losses[0][row]),
-                entropy_loss=th.tensor(losses[1][row]),
-                value_loss=th.tensor(losses[2][row]),
-                values=th.as_tensor(values[row, : lengths[row]]),
+                policy_loss=losses[0, row],
+                entropy_loss=losses[1, row],
+                value_loss=losses[2, row],
+                values=values[row, : lengths[row]],
             )
             if not updates[k].send(result):
                 finished.append(k)
@@ -177,7 +177,7 @@ class _StackedPolicy:
         policy_lrs: np.ndarray,
         value_lrs: np.ndarray,
         action_masks: np.ndarray | None,
-    ) -> tuple[list[list[float]], np.ndarray]:
+    ) -> tuple[th.Tensor, th.Tensor]:
         """
         One gradient step of each network of the given members, each on the mean over its own chunk of steps
         (``REINFORCE._gradient_step``), the chunks padded to the longest.
@@ -191,8 +191,8 @@ class _StackedPolicy:
         :param policy_lrs: every member's α^θ, shape (K,)
         :param value_lrs: every member's α^w, shape (K,)
         :param action_masks: the legal actions at each step, shape (M, B, n_actions); None: every action legal
-        :return: each member's policy, entropy and value losses (three lists of M), and v̂(S_t) before the step
-            (zeros without a baseline), shape (M, B)
+        :return: each member's policy, entropy and value losses, shape (3, M), and v̂(S_t) before the step (zeros
+            without a baseline), shape (M, B), detached
         """
         device = self.device
         index = self._all if len(members) == len(self.models) else th.as_tensor(members, device=device)
@@ -233,8 +233,8 @@ class _StackedPolicy:
             if self.clip:
                 clip_grad_norms_per_member(part.parameters, self.max_grad_norm)
             part.optimizer.step(members, learning_rates)
-        losses = th.stack([member_losses.policy, member_losses.entropy, member_losses.value]).detach().cpu().tolist()
-        return losses, values.detach().cpu().numpy()
+        losses = th.stack([member_losses.policy, member_losses.entropy, member_losses.value]).detach()
+        return losses, values.detach()
 
     def close(self) -> None:
         """Each member's parameters get storage of their own again, and its optimizers their slices' Adam states."""

@@ -424,11 +424,11 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
 
     def _gradient_step(
         self,
-        observations: th.Tensor | dict[str, th.Tensor],
-        actions: th.Tensor,
-        returns: th.Tensor,
-        episode_steps: th.Tensor,
-        action_masks: th.Tensor | None = None,
+        observations: np.ndarray | dict[str, np.ndarray],
+        actions: np.ndarray,
+        returns: np.ndarray,
+        episode_steps: np.ndarray,
+        action_masks: np.ndarray | None = None,
     ) -> dict[str, th.Tensor]:
         """
         One gradient step of each network on the mean over the given steps (one step: the book's per-step update).
@@ -440,13 +440,17 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         :param action_masks: the legal actions of each S_t, shape (B, mask_size), if masking is on
         :return: the losses, and v̂(S_t) before the step (detached; zeros without a baseline)
         """
+        obs = obs_as_tensor(observations, self.device)
+        actions_t = th.as_tensor(actions, device=self.device)
+        returns_t = th.as_tensor(returns, device=self.device)
+        masks = None if action_masks is None else th.as_tensor(action_masks, device=self.device)
         if self.use_baseline:
-            values, log_prob, entropy = self.policy.evaluate_actions(observations, actions, action_masks)
+            values, log_prob, entropy = self.policy.evaluate_actions(obs, actions_t, masks)
             values = values.flatten()
         else:
-            distribution = self.policy.get_distribution(observations, action_masks)
-            log_prob, entropy = distribution.log_prob(actions), distribution.entropy()
-            values = th.zeros_like(returns)
+            distribution = self.policy.get_distribution(obs, masks)
+            log_prob, entropy = distribution.log_prob(actions_t), distribution.entropy()
+            values = th.zeros_like(returns_t)
         assert entropy is not None, "the action distributions REINFORCE supports have an entropy"
 
         # (a model alone is a member axis of one)
@@ -454,8 +458,8 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             log_prob.unsqueeze(0),
             entropy.unsqueeze(0),
             values.unsqueeze(0),
-            returns.unsqueeze(0),
-            episode_steps.unsqueeze(0),
+            returns_t.unsqueeze(0),
+            th.as_tensor(episode_steps, device=self.device).unsqueeze(0),
             self.gamma,
             self.gamma_t_factor,
             self.normalize_advantage,
@@ -506,19 +510,15 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
         self.policy.set_training_mode(True)
         if batch is None:
             return
-        observations = obs_as_tensor(batch.observations, self.device)
-        actions = th.as_tensor(batch.actions, device=self.device)
-        returns = th.as_tensor(batch.targets, device=self.device)
-        episode_steps = th.as_tensor(batch.episode_steps, device=self.device)
-        masks = None if batch.action_masks is None else th.as_tensor(batch.action_masks, device=self.device)
 
         # Per step: the book's loop over each episode's steps t = 0, …, T − 1, in the order they were taken (with
         # several envs, the episodes' steps interleave in time order)
         steps = []
-        for chunk in self._update_slices(len(returns)):
+        masks = batch.action_masks
+        for chunk in self._update_slices(len(batch.targets)):
             chunk_masks = None if masks is None else masks[chunk]
-            chunk_observations = select(observations, chunk)  # type: ignore[arg-type]
-            steps.append((yield chunk_observations, actions[chunk], returns[chunk], episode_steps[chunk], chunk_masks))
+            chunk_steps = batch.actions[chunk], batch.targets[chunk], batch.episode_steps[chunk], chunk_masks
+            steps.append((yield select(batch.observations, chunk), *chunk_steps))
 
         self.rollout_buffer.mark_trained(batch.n_trained)
         self._n_updates += len(steps)
