@@ -189,18 +189,22 @@ def test_readings_reinterpret_only_the_settings_a_variant_has(tmp_path: Path) ->
         # Not a number: its own message only (it said too that "every seed reaches" nan)
         (("threshold_window: 3", "threshold_window: 3\nthreshold: abc"), ["threshold: 'abc': give the return"]),
         # An env of one's own: how to register it, and Gymnasium's module:EnvId form (it was "not a registered
-        # Gymnasium env" with no way shown)
+        # Gymnasium env" with no way shown). The ids are ones no test registers: Gymnasium's registry is global to
+        # the process, and the docs' examples and the chain_env study register Chain-v0 and ShortChain-v0 in it
         (
-            ("env: CartPole-v1", "env: ShortChain-v0"),
-            ["env: 'ShortChain-v0' is not a registered Gymnasium env", "gymnasium.register(", "env: mychain:Chain-v0"],
+            ("env: CartPole-v1", "env: Unregistered-v0"),
+            ["env: 'Unregistered-v0' is not a registered Gymnasium env", "gymnasium.register(", "env: mychain:Chain-v0"],
         ),
         (
             ("env: CartPole-v1", "env: no_such_module_here:Chain-v0"),
             ["env: 'no_such_module_here:Chain-v0': its module 'no_such_module_here' cannot be imported", "PYTHONPATH"],
         ),
         (
-            ("env: CartPole-v1", "env: chain_env:Chain-v0"),
-            ["importing 'chain_env' registers no env 'Chain-v0'", "gymnasium.register(id='Chain-v0', entry_point=...)"],
+            ("env: CartPole-v1", "env: chain_env:Unregistered-v0"),
+            [
+                "importing 'chain_env' registers no env 'Unregistered-v0'",
+                "gymnasium.register(id='Unregistered-v0', entry_point=...)",
+            ],
         ),
         (("env: CartPole-v1", "env: a:b:Chain-v0"), ["env: 'a:b:Chain-v0': the id of a registered", "module:EnvId"]),
         (
