@@ -154,13 +154,18 @@ class _StackedPolicy:
             x, actions, returns, episode_steps, lengths, np.array(members), policy_lrs, value_lrs, masks
         )
         finished = []
-        for row, k in enumerate(members):
+        # (each member's losses and values as views, unbound in one call per tensor rather than indexed per member)
+        member_values = values.unbind(0)
+        policy_losses, entropy_losses, value_losses = (loss.unbind(0) for loss in losses.unbind(0))
+        member_losses = zip(members, policy_losses, entropy_losses, value_losses, strict=True)
+        for row, (k, policy_loss, entropy_loss, value_loss) in enumerate(member_losses):
+            n = lengths[row]
             # (what the member's _gradient_step returns)
             result = dict(
-                policy_loss=losses[0, row],
-                entropy_loss=losses[1, row],
-                value_loss=losses[2, row],
-                values=values[row, : lengths[row]],
+                policy_loss=policy_loss,
+                entropy_loss=entropy_loss,
+                value_loss=value_loss,
+                values=member_values[row] if n == width else member_values[row][:n],
             )
             if not updates[k].send(result):
                 finished.append(k)
