@@ -17,7 +17,9 @@ to the lockstep code proves itself as a change to a separate run's does.
     python -m benchmarks.digest --check FILE         # exit 1 and name each configuration whose digest differs
 
 Seeded CPU runs repeat to the bit on one machine and one set of library versions; another CPU or another PyTorch
-may round differently, so a digest file is compared on the machine that wrote it.
+may round differently (an AVX-512 CPU against an AVX2 one, say), so a digest file is compared on the machine that wrote
+it. The file names that machine (``"machine"``: the CPU, PyTorch and NumPy), and ``--check`` on another one says so:
+there, take a reference of your own with ``--save`` before a change, and ``--check`` it after.
 """
 
 import argparse
@@ -29,17 +31,20 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch as th
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.logger import KVWriter, Logger
 
 import sb3_classic.envs  # noqa: F401  (registers the book's envs)
-from benchmarks.lockstep import population_of
+from benchmarks.lockstep import cpu_model, population_of
 from sb3_classic import REINFORCE, NStepSARSA, TileCoding
 from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
 
 SMALL_NET = dict(net_arch=[64, 64])
+#: The key of a digest file that names the machine which wrote it (``machine``)
+MACHINE = "machine"
 
 
 class TrainLog(KVWriter):
@@ -54,6 +59,11 @@ class TrainLog(KVWriter):
 
     def close(self) -> None:
         pass
+
+
+def machine() -> str:
+    """:return: what a digest depends on besides the code and the configuration: the CPU, PyTorch and NumPy"""
+    return f"{cpu_model()}, torch {th.__version__}, numpy {np.__version__}"
 
 
 def digest(model: BaseAlgorithm, train_log: Sequence[dict[str, str]] = ()) -> str:
@@ -236,8 +246,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         for name in differ:
             print(f"{name}: {digests[name]}, {args.check} has {expected.get(name)}")
         print(f"{len(names) - len(differ)} of {len(names)} digests as in {args.check}")
+        written_on, here = expected.get(MACHINE), machine()
+        if differ and written_on != here:
+            print(
+                f"{args.check} was written on {written_on or 'a machine it does not name'}; this is {here}. Another CPU "
+                "or library version may round otherwise: compare digests taken on one machine (--save a reference "
+                "before the change, --check it after)"
+            )
         return 1 if differ else 0
-    text = json.dumps(digests, indent=2) + "\n"
+    text = json.dumps({MACHINE: machine(), **digests}, indent=2) + "\n"
     if args.save is not None:
         args.save.write_text(text)
     else:

@@ -55,7 +55,17 @@ def test_a_seeded_configuration_repeats_its_digest_and_check_finds_a_difference(
     digests[name] = "0" * 64
     saved.write_text(json.dumps(digests))
     assert digest_tool.main(["--only", name, "--check", str(saved)]) == 1
-    assert f"{name}: " in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert f"{name}: " in out
+    # Written on this machine: a difference is the code's, and nothing is said of machines
+    assert digests[digest_tool.MACHINE] == digest_tool.machine()
+    assert "was written on" not in out
+    # Written on another CPU: the check says so, naming both
+    digests[digest_tool.MACHINE] = "Another CPU (x86_64), torch 0.0, numpy 0.0"
+    saved.write_text(json.dumps(digests))
+    assert digest_tool.main(["--only", name, "--check", str(saved)]) == 1
+    out = capsys.readouterr().out
+    assert f"was written on Another CPU (x86_64), torch 0.0, numpy 0.0; this is {digest_tool.machine()}" in out
 
 
 def test_the_configurations_cover_both_algorithms_and_both_update_modes() -> None:
