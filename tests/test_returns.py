@@ -14,6 +14,7 @@ from sb3_classic.common.returns import (
     discounted_returns,
     epsilon_greedy_expectation,
     gamma_powers,
+    greedy_random_ties,
     nstep_targets,
     nstep_window,
     nstep_windows,
@@ -155,3 +156,27 @@ def test_epsilon_greedy_expectation(epsilon: float) -> None:
     q = np.array([[1.0, 4.0, 2.0], [0.0, 0.0, 3.0]])
     expected = [sum(q[i, a] * ((1 - epsilon) * (a == q[i].argmax()) + epsilon / 3) for a in range(3)) for i in range(2)]
     np.testing.assert_allclose(epsilon_greedy_expectation(q, epsilon), expected)
+
+
+def reference_greedy_random_ties(q_values: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """S&B §2.2's greedy action, ties broken at random: row by row, a draw only where several actions are greatest."""
+    actions = []
+    for row in q_values:
+        greatest = np.flatnonzero(row == row.max())
+        actions.append(greatest[0] if len(greatest) == 1 else rng.choice(greatest))
+    return np.array(actions, dtype=np.int64)
+
+
+@pytest.mark.parametrize("n_rows", [1, 4])
+def test_greedy_random_ties_draws_as_the_book_row_by_row(n_rows: int) -> None:
+    # Values in {0, 1, 2}: most rows tie; one env (one row, the book's loop) takes a path of its own
+    q_values = np.random.default_rng(1).integers(0, 3, size=(200, n_rows, 4)).astype(np.float32)
+    rng, reference_rng = np.random.default_rng(2), np.random.default_rng(2)
+    drawn = np.stack([greedy_random_ties(q.copy(), rng) for q in q_values])
+    expected = np.stack([reference_greedy_random_ties(q, reference_rng) for q in q_values])
+    np.testing.assert_array_equal(drawn, expected)
+    # The same draws, so the generators are left in the same state
+    assert rng.random() == reference_rng.random()
+    # Every tied action is drawn, none that is not greatest
+    assert set(np.unique(drawn[:, 0])) == set(range(4))
+    assert np.all(np.take_along_axis(q_values, drawn[..., None], axis=2)[..., 0] == q_values.max(axis=2))

@@ -261,3 +261,30 @@ def test_the_bootstrap_copy_and_the_average_take_the_running_statistics() -> Non
     assert average is not None
     with th.no_grad():
         th.testing.assert_close(average(obs), model.policy.q_net(obs))
+
+
+@pytest.mark.parametrize("n_envs", [1, 3])
+@pytest.mark.parametrize("own_generator", [False, True])
+def test_epsilon_greedy_draws_as_the_book(n_envs: int, own_generator: bool) -> None:
+    # S&B §2.2: with probability ε an action drawn uniformly, else the greedy one; every env's coin first, then the
+    # uniform actions, from the model's generator (a population member's) or NumPy's global one (a model alone). One
+    # env (the book's loop) takes a path of its own, which must draw the same numbers
+    model = NStepSARSA("MlpPolicy", make_vec_env("Acrobot-v1", n_envs=n_envs), seed=0)
+    model.exploration_rate = 0.4
+    if own_generator:
+        model._action_rng, reference = np.random.default_rng(5), np.random.default_rng(5)
+    else:
+        np.random.seed(5)
+        reference = np.random.RandomState(5)
+    greedy = np.array([2, 0, 1][:n_envs], dtype=np.int64)
+    for _ in range(300):
+        actions = model._epsilon_greedy(greedy)
+        explore = reference.random(n_envs) < 0.4
+        expected = greedy
+        if explore.any():  # (no uniform draws where no env explores)
+            uniform = reference.integers(0, 3, n_envs) if own_generator else reference.randint(0, 3, n_envs)
+            expected = np.where(explore, uniform, greedy)
+        np.testing.assert_array_equal(actions, expected)
+        assert actions.dtype == np.int64 and actions.shape == (n_envs,)
+    # The same draws: the generators end in the same state
+    assert (model._action_rng.random() if own_generator else np.random.random()) == reference.random()

@@ -403,8 +403,15 @@ def greedy_random_ties(q_values: np.ndarray, rng: np.random.Generator | None = N
     :return: the greedy actions, shape (batch,), int64
     """
     greedy = q_values.argmax(axis=1)
+    if len(q_values) == 1:
+        # One env (the book's loop, at every env step): the row's own comparison, a third of the general case's cost
+        row = q_values[0]
+        ties = np.flatnonzero(row == row[greedy[0]])
+        if len(ties) > 1:
+            greedy[0] = np.random.choice(ties) if rng is None else rng.choice(ties)
+        return greedy
     is_max = q_values == q_values.max(axis=1, keepdims=True)
-    if is_max.sum() > len(q_values):
+    if np.count_nonzero(is_max) > len(q_values):
         for row in np.flatnonzero(is_max.sum(axis=1) > 1):
             ties = np.flatnonzero(is_max[row])
             greedy[row] = np.random.choice(ties) if rng is None else rng.choice(ties)

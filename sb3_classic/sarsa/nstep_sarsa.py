@@ -360,6 +360,13 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
             for each observation independently
         """
         rng, shape, stop = self._action_rng, greedy_actions.shape, first_action + self.action_space.n
+        if shape == (1,) and action_masks is None:
+            # One env (the book's loop, at every env step): scalar draws, the same numbers from the generator as arrays
+            # of one, at a third of their cost
+            if (np.random.random() if rng is None else rng.random()) >= self.exploration_rate:
+                return greedy_actions
+            uniform_action = np.random.randint(first_action, stop) if rng is None else rng.integers(first_action, stop)
+            return np.full(1, uniform_action, dtype=np.result_type(greedy_actions, np.int64))
         explore = (np.random.random(shape) if rng is None else rng.random(shape)) < self.exploration_rate
         if not explore.any():
             return greedy_actions
