@@ -271,6 +271,7 @@ def test_epsilon_greedy_draws_as_the_book(n_envs: int, own_generator: bool) -> N
     # env (the book's loop) takes a path of its own, which must draw the same numbers
     model = NStepSARSA("MlpPolicy", make_vec_env("Acrobot-v1", n_envs=n_envs), seed=0)
     model.exploration_rate = 0.4
+    reference: Any  # (a Generator, or the RandomState of NumPy's global functions)
     if own_generator:
         model._action_rng, reference = np.random.default_rng(5), np.random.default_rng(5)
     else:
@@ -285,6 +286,8 @@ def test_epsilon_greedy_draws_as_the_book(n_envs: int, own_generator: bool) -> N
             uniform = reference.integers(0, 3, n_envs) if own_generator else reference.randint(0, 3, n_envs)
             expected = np.where(explore, uniform, greedy)
         np.testing.assert_array_equal(actions, expected)
-        assert actions.dtype == np.int64 and actions.shape == (n_envs,)
+        assert actions.dtype == np.int64
+        assert actions.shape == (n_envs,)
     # The same draws: the generators end in the same state
-    assert (model._action_rng.random() if own_generator else np.random.random()) == reference.random()
+    next_draw = model._action_rng.random() if model._action_rng is not None else np.random.random()
+    assert next_draw == reference.random()
