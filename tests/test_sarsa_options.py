@@ -285,6 +285,7 @@ def test_epsilon_greedy_draws_as_the_book(n_envs: int, own_generator: bool) -> N
         if explore.any():  # (no uniform draws where no env explores)
             uniform = reference.integers(0, 3, n_envs) if own_generator else reference.randint(0, 3, n_envs)
             expected = np.where(explore, uniform, greedy)
+        # Exact: integer actions from one seeded stream (NumPy's generators give the same numbers on every CPU)
         np.testing.assert_array_equal(actions, expected)
         assert actions.dtype == np.int64
         assert actions.shape == (n_envs,)

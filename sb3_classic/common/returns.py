@@ -403,14 +403,10 @@ def greedy_random_ties(q_values: np.ndarray, rng: np.random.Generator | None = N
     :return: the greedy actions, shape (batch,), int64
     """
     greedy = q_values.argmax(axis=1)
-    if len(q_values) == 1:
-        # One env (the book's loop, at every env step): the row's own comparison, a third of the general case's cost
-        row = q_values[0]
-        ties = np.flatnonzero(row == row[greedy[0]])
-        if len(ties) > 1:
-            greedy[0] = np.random.choice(ties) if rng is None else rng.choice(ties)
-        return greedy
-    is_max = q_values == q_values.max(axis=1, keepdims=True)
+    # Each row's greatest value; with one env (the book's loop, at every env step) its argmax's, read without a
+    # reduction over the array, which costs more than the rest of the check
+    greatest = q_values[0, greedy[0]] if len(q_values) == 1 else q_values.max(axis=1, keepdims=True)
+    is_max = q_values == greatest
     if np.count_nonzero(is_max) > len(q_values):
         for row in np.flatnonzero(is_max.sum(axis=1) > 1):
             ties = np.flatnonzero(is_max[row])
