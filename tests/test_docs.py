@@ -207,11 +207,11 @@ def minus(text: str) -> str:
     return text.replace("−", "-")
 
 
-def learning_rows() -> dict[tuple[str, str], str]:
-    """:return: (env, algorithm) → that row of ``benchmarks/results/learning.md``"""
+def learning_rows(results: Path = RESULTS / "learning.md") -> dict[tuple[str, str], str]:
+    """:return: (env, algorithm) → that row of ``results`` (``benchmarks/results/learning.md`` by default)"""
     rows: dict[tuple[str, str], str] = {}
     env = ""
-    for line in (RESULTS / "learning.md").read_text().splitlines():
+    for line in results.read_text().splitlines():
         if line.startswith("## ") and "threshold" in line:
             env = line.split()[1]
         elif line.startswith("| ") and env:
@@ -236,6 +236,22 @@ def test_the_learning_table_is_the_committed_results(path: str) -> None:
             row = rows[(env, name)]
             for cell in env_cells:
                 assert f"| {minus(cell)} |" in row, f"{path}: {name} {env} {cell!r} is not in learning.md's {row!r}"
+
+
+@pytest.mark.parametrize("path", ["README.md", "docs/guide/benchmarks.md"])
+def test_the_lunar_lander_table_is_the_committed_results(path: str) -> None:
+    results = RESULTS / "lunar-lander" / "learning.md"
+    rows = learning_rows(results)
+    (table,) = re.findall(r"^\| \| LunarLander-v3 final .*?\n\|[-|]+\n((?:\|.*\n)+)", (ROOT / path).read_text(), re.MULTILINE)
+    algorithms = []
+    for line in table.splitlines():
+        algorithm, *cells = (cell.strip() for cell in line.strip().strip("|").split("|"))
+        name = algorithm.strip("*")
+        algorithms.append(name)
+        row = rows[("LunarLander-v3", name)]
+        for cell in cells:
+            assert f"| {minus(cell)} |" in row, f"{path}: {name} {cell!r} is not in {results.name}'s {row!r}"
+    assert algorithms == ["REINFORCE", "NStepSARSA", "A2C", "PPO", "DQN"], f"{path}: {algorithms}"
 
 
 @pytest.mark.parametrize("path", ["README.md", "docs/guide/benchmarks.md"])
