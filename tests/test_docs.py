@@ -219,9 +219,13 @@ def learning_rows(results: Path = RESULTS / "learning.md") -> dict[tuple[str, st
     return rows
 
 
-def headline_tables(text: str) -> list[list[str]]:
-    """:return: the rows of a page's table of both envs (CartPole-v1 final, …, Acrobot-v1 final, …), as cells"""
-    tables = re.findall(r"^\| \| CartPole-v1 final .*?\n\|[-|]+\n((?:\|.*\n)+)", text, flags=re.MULTILINE)
+def headline_tables(text: str, first_column: str = "CartPole-v1 final") -> list[list[str]]:
+    """
+    :return: the rows of a page's results tables whose first header after the empty one is ``first_column`` (by
+        default the table of both envs: CartPole-v1 final, …, Acrobot-v1 final, …), as cells
+    """
+    heading = re.escape(first_column)
+    tables = re.findall(rf"^\| \| {heading} .*?\n\|[-|]+\n((?:\|.*\n)+)", text, flags=re.MULTILINE)
     return [[cell.strip() for cell in row.strip().strip("|").split("|")] for table in tables for row in table.splitlines()]
 
 
@@ -242,10 +246,8 @@ def test_the_learning_table_is_the_committed_results(path: str) -> None:
 def test_the_lunar_lander_table_is_the_committed_results(path: str) -> None:
     results = RESULTS / "lunar-lander" / "learning.md"
     rows = learning_rows(results)
-    (table,) = re.findall(r"^\| \| LunarLander-v3 final .*?\n\|[-|]+\n((?:\|.*\n)+)", (ROOT / path).read_text(), re.MULTILINE)
     algorithms = []
-    for line in table.splitlines():
-        algorithm, *cells = (cell.strip() for cell in line.strip().strip("|").split("|"))
+    for algorithm, *cells in headline_tables((ROOT / path).read_text(), "LunarLander-v3 final"):
         name = algorithm.strip("*")
         algorithms.append(name)
         row = rows[("LunarLander-v3", name)]
