@@ -4,6 +4,7 @@ import math
 import warnings
 from abc import abstractmethod
 from collections.abc import Callable, Generator, Sequence
+from contextlib import nullcontext
 from typing import Any, TypeVar
 
 import numpy as np
@@ -385,8 +386,10 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
                 check_final_observation(self, self.rollout_buffer.episode_length, final_obs, int(idx))
                 truncated[idx] = True
                 final_observations[int(idx)] = final_obs
-        if self.max_episode_length is not None:
-            overlong = ~dones & (self.rollout_buffer.episode_length + 1 >= self.max_episode_length)
+        episode_length = self.rollout_buffer.episode_length
+        # (the longest episode first: one reduction at every env step, REINFORCE's cap of 100,000 steps seldom reached)
+        if self.max_episode_length is not None and int(episode_length.max()) + 1 >= self.max_episode_length:
+            overlong = ~dones & (episode_length + 1 >= self.max_episode_length)
             if overlong.any():
                 warn_episodes_cut(self, np.flatnonzero(overlong).tolist(), self.max_episode_length)
                 ends = dones | overlong
@@ -492,7 +495,8 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
         if use_masking:
             # Read before the action is chosen, as sb3-contrib's MaskablePPO reads them
             action_masks = self._read_action_masks(env)
-        with th.no_grad():
+        # (a population's forward pass is made already: its members' choices are NumPy's, with nothing for autograd)
+        with th.no_grad() if behaviour is None else nullcontext():
             actions = self._sample_actions(self._last_obs, action_masks, behaviour)  # type: ignore[arg-type]
         env_actions = actions
         if self._action_offset is not None:
