@@ -19,10 +19,12 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import matplotlib.figure
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 import pytest
+import yaml
 from rich.console import Console
 
 from benchmarks.common import REPO_ROOT
@@ -814,6 +816,46 @@ def test_the_outputs_give_each_seed_and_say_when_runs_are_missing(tmp_path: Path
     assert len(pd.read_csv(results / "study-seeds.csv")) == 3
 
 
+def test_a_report_of_too_few_seeds_does_not_call_its_intervals_95_percent(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A study of 2 seeds called its figure's band and its table's intervals 95% ones, which a bootstrap over fewer than
+    # MIN_SEEDS values does not give (its verdicts were too close to call, its page did not say why)
+    titles: list[str] = []
+    suptitle = matplotlib.figure.Figure.suptitle
+
+    def recorded(figure: matplotlib.figure.Figure, text: str, **kwargs: Any) -> Any:
+        titles.append(text)
+        return suptitle(figure, text, **kwargs)
+
+    monkeypatch.setattr(matplotlib.figure.Figure, "suptitle", recorded)
+    pages = {}
+    for n_seeds in (2, stats.MIN_SEEDS):
+        folder = tmp_path / str(n_seeds)
+        folder.mkdir()
+        study_file, cache, results = fake_cache(folder, TINY.replace("seeds: 2", f"seeds: {n_seeds}"))
+        command = [str(study_file), "--report-only", "--cache-dir", str(cache), "--results-dir", str(results)]
+        assert studies_cli.main(command) == 0
+        pages[n_seeds] = " ".join((results / "study.md").read_text().split())
+    few, enough = pages[2], pages[stats.MIN_SEEDS]
+    assert "- Intervals: 95% bootstrap over seeds (`scipy.stats.bootstrap`, BCa); verdicts" in enough
+    assert "- Intervals: bootstrap over seeds (`scipy.stats.bootstrap`, BCa), at 95% but from 2 seeds, too few" in few
+    assert "every verdict is too close to call" in few
+    assert ["95% bootstrap band" in title for title in titles] == [False, True], titles
+    assert "bootstrap band (2 seeds: too few for a 95% one)" in titles[0]
+
+
+def test_the_settings_of_a_report_are_written_out_in_full() -> None:
+    # Two variants sharing a setting's value were written with a YAML anchor and alias (env_kwargs: &id001, then
+    # env_kwargs: *id001): valid YAML, but not what a reader pastes into a zoo file
+    shared = {"sutton_barto_reward": True}
+    text = outputs.settings_yaml({"a": {"env_kwargs": shared, "n_steps": 1}, "b": {"env_kwargs": shared}})
+    assert "&" not in text, text
+    assert "*" not in text, text
+    assert yaml.safe_load(text) == {"a": {"env_kwargs": shared, "n_steps": 1}, "b": {"env_kwargs": shared}}
+    assert text.count("sutton_barto_reward: true") == 2, text
+
+
 def test_a_budget_in_steps_shows_each_variants_fewest_and_most_episodes(tmp_path: Path) -> None:
     # The table's Episodes were the figure's (the fewest any seed completed) while each seed's metrics were over all of
     # its own episodes, and seeds that never reached the threshold were said to count as "the episode budget"
@@ -1087,8 +1129,8 @@ def test_a_verdict_between_variants_that_did_not_learn_says_so(tmp_path: Path, c
     assert 26.3 < level.high < 60, level
     said = " ".join(page(26.0).split())
     note = (
-        f"none of the 2 compared variants has a mean return over its last 100 episodes above a uniformly random policy's "
-        f"({level.format()}): the verdict compares runs that did not measurably learn"
+        "none of the 2 compared variants has a mean return over its last 100 episodes (all, in a shorter run) above a "
+        f"uniformly random policy's ({level.format()}): the verdict compares runs that did not measurably learn"
     )
     assert "- **supported**: n = 3 beats n = 1. Measured: " in said
     assert f"**Not learned**: {note}." in said  # the study's page

@@ -248,7 +248,7 @@ def plot_study(results: StudyResults, path: Path) -> Path:
     smooth = f", moving average of {study.smooth} episodes" if study.smooth > 1 else ""
     for row in axes:
         row[0].set_ylabel("Training return")
-    figure.suptitle(f"{study.title}\nmean over seeds with its 95% bootstrap band{smooth}", fontsize=10)
+    figure.suptitle(f"{study.title}\nmean over seeds with its {_band(len(study.seeds))}{smooth}", fontsize=10)
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(path, dpi=110)
     plt.close(figure)
@@ -324,8 +324,7 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         f"- Threshold: {study.threshold:g}, reached when the mean of {study.threshold_window} consecutive training "
         "episodes reaches it (episodes to threshold: the last episode of the first such window; seeds that never "
         f"reach it count as {censored_at}, a lower bound).",
-        "- Intervals: 95% bootstrap over seeds (`scipy.stats.bootstrap`, BCa); verdicts by the rule of "
-        "[STUDIES.md](STUDIES.md).",
+        f"- Intervals: {_intervals(len(study.seeds))}; verdicts by the rule of [STUDIES.md](STUDIES.md).",
         *_random_level_notes(results),
         *_short_budget_notes(study),
         *_step_budget_notes(results),
@@ -370,10 +369,10 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         "",
     ]
     entries = {variant: _without_budget(study.zoo_entry(variant)) for variant in study.variants}
-    lines += ["```yaml", yaml.safe_dump(entries, sort_keys=False).rstrip(), "```"]
+    lines += ["```yaml", settings_yaml(entries), "```"]
     if len(study.readings) > 1:
         readings = {name: overrides for name, overrides in study.readings.items() if name != STATED}
-        lines += ["", "Readings:", "", "```yaml", yaml.safe_dump(readings, sort_keys=False).rstrip(), "```"]
+        lines += ["", "Readings:", "", "```yaml", settings_yaml(readings), "```"]
     if study.notes:
         lines += ["", "## Notes", "", study.notes]
     path = results_dir / f"{study.name}.md"
@@ -500,6 +499,37 @@ def write_studies_index(
     results_dir.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines))
     return path
+
+
+class _SettingsDumper(yaml.SafeDumper):
+    """PyYAML's safe dumper without anchors and aliases: settings two variants share are written out in each."""
+
+    def ignore_aliases(self, data: Any) -> bool:
+        return True
+
+
+def settings_yaml(settings: dict[str, Any]) -> str:
+    """
+    :param settings: zoo entries or readings, by name
+    :return: them as YAML, in their order, each written out in full (no ``&id001`` anchor and ``*id001`` alias where
+        two share a value): what a reader pastes into a zoo file
+    """
+    return yaml.dump(settings, Dumper=_SettingsDumper, sort_keys=False).rstrip()
+
+
+def _band(n_seeds: int) -> str:
+    """:return: what the figure's band over ``n_seeds`` seeds is: a 95% one from ``stats.MIN_SEEDS`` seeds on"""
+    if n_seeds >= stats.MIN_SEEDS:
+        return "95% bootstrap band"
+    return f"bootstrap band ({n_seeds} seeds: too few for a 95% one)"
+
+
+def _intervals(n_seeds: int) -> str:
+    """:return: what the report's intervals over ``n_seeds`` seeds are (``_band``)"""
+    method = "bootstrap over seeds (`scipy.stats.bootstrap`, BCa)"
+    if n_seeds >= stats.MIN_SEEDS:
+        return f"95% {method}"
+    return f"{method}, at 95% but from {n_seeds} seeds, too few for it to hold: every verdict is too close to call"
 
 
 def _random_level_notes(results: StudyResults) -> list[str]:

@@ -280,10 +280,12 @@ def untrained_note(claim: Claim, metrics: Mapping[str, Mapping[str, np.ndarray]]
         if low > high:
             return ""
     shown = " or ".join(sorted({levels[variant].format() for variant in variants}))
+    # (a run of fewer episodes: all of them)
+    last = f"its last {LAST_EPISODES} episodes (all, in a shorter run)"
     if len(variants) == 1:
-        what = f"{claim.variant}'s mean return over its last {LAST_EPISODES} episodes is not"
+        what = f"{claim.variant}'s mean return over {last} is not"
     else:
-        what = f"none of the {len(variants)} compared variants has a mean return over its last {LAST_EPISODES} episodes"
+        what = f"none of the {len(variants)} compared variants has a mean return over {last}"
     return f"{what} above a uniformly random policy's ({shown}): the verdict compares runs that did not measurably learn"
 
 
