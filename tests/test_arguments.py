@@ -35,8 +35,10 @@ REFUSED_INPUTS = [
     (NStepSARSA, dict(n_step=5), TypeError, "unexpected keyword argument 'n_step': did you mean 'n_steps'?"),
     (REINFORCE, dict(value_learning_rates=0.1), TypeError, "did you mean 'value_learning_rate'?"),
     # The other algorithm's argument was taken for a misspelling ("did you mean 'learning_rate'?" alone)
-    (NStepSARSA, dict(value_learning_rate=0.1), TypeError, "it is an argument of REINFORCE, not of NStepSARSA (did you"),
-    (REINFORCE, dict(td_lambda=0.5), TypeError, "'td_lambda': it is an argument of NStepSARSA, not of REINFORCE"),
+    (NStepSARSA, dict(value_learning_rate=0.1), TypeError, "argument of REINFORCE, not of NStepSARSA; did you mean 'lea"),
+    (REINFORCE, dict(td_lambda=0.5), TypeError, "'td_lambda': it is an argument of NStepSARSA, not of REINFORCE; REINFO"),
+    # (A2C's and PPO's rollout length: REINFORCE's own arguments are listed, n_episodes among them)
+    (REINFORCE, dict(n_steps=5), TypeError, "not of REINFORCE; REINFORCE takes policy, env, learning_rate, value_learning"),
     # SB3's form before 1.8, which A2C still takes with a warning: the error says what to write instead
     (REINFORCE, dict(policy_kwargs=dict(net_arch=[dict(pi=[32], vf=[16])])), ValueError, "write net_arch={'pi': [32], 'vf'"),
     (REINFORCE, dict(policy_kwargs=dict(net_arch=[8, dict(pi=[32], vf=[16])])), ValueError, "no shared layers"),

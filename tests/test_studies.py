@@ -820,7 +820,7 @@ def test_a_report_of_too_few_seeds_does_not_call_its_intervals_95_percent(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     # A study of 2 seeds called its figure's band and its table's intervals 95% ones, which a bootstrap over fewer than
-    # MIN_SEEDS values does not give (its verdicts were too close to call, its page did not say why)
+    # MIN_SEEDS values does not give (its verdicts were too close to call, said only beside each claim)
     titles: list[str] = []
     suptitle = matplotlib.figure.Figure.suptitle
 
@@ -845,15 +845,18 @@ def test_a_report_of_too_few_seeds_does_not_call_its_intervals_95_percent(
     assert "bootstrap band (2 seeds: too few for a 95% one)" in titles[0]
 
 
-def test_the_settings_of_a_report_are_written_out_in_full() -> None:
+def test_the_settings_of_a_report_are_written_out_in_full(tmp_path: Path) -> None:
     # Two variants sharing a setting's value were written with a YAML anchor and alias (env_kwargs: &id001, then
     # env_kwargs: *id001): valid YAML, but not what a reader pastes into a zoo file
-    shared = {"sutton_barto_reward": True}
-    text = outputs.settings_yaml({"a": {"env_kwargs": shared, "n_steps": 1}, "b": {"env_kwargs": shared}})
-    assert "&" not in text, text
-    assert "*" not in text, text
-    assert yaml.safe_load(text) == {"a": {"env_kwargs": shared, "n_steps": 1}, "b": {"env_kwargs": shared}}
-    assert text.count("sutton_barto_reward: true") == 2, text
+    shared = TINY.replace("  policy: MlpPolicy\n", "  policy: MlpPolicy\n  env_kwargs: {sutton_barto_reward: true}\n")
+    study_file, cache, results = fake_cache(tmp_path, shared)
+    command = [str(study_file), "--report-only", "--cache-dir", str(cache), "--results-dir", str(results)]
+    assert studies_cli.main(command) == 0
+    page = (results / "study.md").read_text()
+    settings = page.split("## Settings", 1)[1].split("```yaml\n", 1)[1].split("```", 1)[0]
+    assert "&id" not in settings, settings
+    entries = yaml.safe_load(settings)
+    assert [entries[variant]["env_kwargs"] for variant in ("n1", "n3")] == [{"sutton_barto_reward": True}] * 2, settings
 
 
 def test_a_budget_in_steps_shows_each_variants_fewest_and_most_episodes(tmp_path: Path) -> None:

@@ -172,12 +172,10 @@ def check_keywords(cls: type, kwargs: Mapping[str, Any], others: Sequence[type] 
         if key not in arguments:
             public = [name for name in arguments if not name.startswith("_")]
             close = difflib.get_close_matches(key, public, n=1)
+            hint = f"did you mean {close[0]!r}?" if close else f"{cls.__name__} takes {', '.join(public)}"
             owners = [other.__name__ for other in others if key in constructor_parameters(other)]
             if owners:
-                hint = f"it is an argument of {' and '.join(owners)}, not of {cls.__name__}"
-                hint += f" (did you mean {close[0]!r}?)" if close else ""
-            else:
-                hint = f"did you mean {close[0]!r}?" if close else f"{cls.__name__} takes {', '.join(public)}"
+                hint = f"it is an argument of {' and '.join(owners)}, not of {cls.__name__}; {hint}"
             raise TypeError(f"{cls.__name__}() got an unexpected keyword argument {key!r}: {hint}")
 
 

@@ -4,7 +4,6 @@ import math
 import warnings
 from abc import abstractmethod
 from collections.abc import Callable, Generator, Sequence
-from contextlib import nullcontext
 from typing import Any, TypeVar
 
 import numpy as np
@@ -497,8 +496,7 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
         if use_masking:
             # Read before the action is chosen, as sb3-contrib's MaskablePPO reads them
             action_masks = self._read_action_masks(env)
-        # (a population's forward pass is made already: its members' choices are NumPy's, with nothing for autograd)
-        with th.no_grad() if behaviour is None else nullcontext():
+        with th.no_grad():
             actions = self._sample_actions(self._last_obs, action_masks, behaviour)  # type: ignore[arg-type]
         env_actions = actions
         if self._action_offset is not None:

@@ -176,7 +176,8 @@ def seeds_frame(results: StudyResults) -> pd.DataFrame:
 def summary_frame(results: StudyResults) -> pd.DataFrame:
     """
     :return: one row per (reading, variant): seeds, the fewest and most episodes a seed completed (``episodes``,
-        ``episodes_max``: equal with a budget in episodes), and each metric's mean over seeds with its 95% interval
+        ``episodes_max``: equal with a budget in episodes), and each metric's mean over seeds with its bootstrap interval
+        (95%; from fewer than ``stats.MIN_SEEDS`` seeds, not one that holds)
     """
     rows = []
     for (reading, variant), metrics in results.metrics.items():
@@ -213,7 +214,7 @@ def markdown_table(results: StudyResults) -> str:
 
 def plot_study(results: StudyResults, path: Path) -> Path:
     """
-    The seed report's figure: training return per episode, the mean over seeds with its 95% bootstrap band, one
+    The seed report's figure: training return per episode, the mean over seeds with its bootstrap band (``_band``), one
     line per variant (a moving average of ``study.smooth`` episodes, of each seed before the mean); one panel per
     reading, ``MAX_PANEL_COLUMNS`` to a row.
 
@@ -521,7 +522,7 @@ def _band(n_seeds: int) -> str:
     """:return: what the figure's band over ``n_seeds`` seeds is: a 95% one from ``stats.MIN_SEEDS`` seeds on"""
     if n_seeds >= stats.MIN_SEEDS:
         return "95% bootstrap band"
-    return f"bootstrap band ({n_seeds} seeds: too few for a 95% one)"
+    return f"bootstrap band ({n_seeds} seed{'s' * (n_seeds != 1)}: too few for a 95% one)"
 
 
 def _intervals(n_seeds: int) -> str:
@@ -529,7 +530,8 @@ def _intervals(n_seeds: int) -> str:
     method = "bootstrap over seeds (`scipy.stats.bootstrap`, BCa)"
     if n_seeds >= stats.MIN_SEEDS:
         return f"95% {method}"
-    return f"{method}, at 95% but from {n_seeds} seeds, too few for it to hold: every verdict is too close to call"
+    seeds = f"{n_seeds} seed{'s' * (n_seeds != 1)}"
+    return f"{method}, at 95% but from {seeds}, too few for it to hold: every verdict is too close to call"
 
 
 def _random_level_notes(results: StudyResults) -> list[str]:
