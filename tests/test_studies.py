@@ -843,6 +843,12 @@ def test_a_report_of_too_few_seeds_does_not_call_its_intervals_95_percent(
     assert "every verdict is too close to call" in few
     assert ["95% bootstrap band" in title for title in titles] == [False, True], titles
     assert "bootstrap band (2 seeds: too few for a 95% one)" in titles[0]
+    # A partial run: the intervals are those of the seeds found
+    shutil.rmtree(load_study(study_file).runs()[0].spec.run_dir(cache))
+    assert studies_cli.main(command) == 1
+    partial = " ".join((results / "study.md").read_text().split())
+    assert f"at 95% but from {stats.MIN_SEEDS - 1} seeds, too few" in partial
+    assert f"bootstrap band ({stats.MIN_SEEDS - 1} seeds: too few for a 95% one)" in titles[-1]
 
 
 def test_the_settings_of_a_report_are_written_out_in_full(tmp_path: Path) -> None:

@@ -249,7 +249,7 @@ def plot_study(results: StudyResults, path: Path) -> Path:
     smooth = f", moving average of {study.smooth} episodes" if study.smooth > 1 else ""
     for row in axes:
         row[0].set_ylabel("Training return")
-    figure.suptitle(f"{study.title}\nmean over seeds with its {_band(len(study.seeds))}{smooth}", fontsize=10)
+    figure.suptitle(f"{study.title}\nmean over seeds with its {_band(_fewest_seeds(results))}{smooth}", fontsize=10)
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(path, dpi=110)
     plt.close(figure)
@@ -325,7 +325,7 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         f"- Threshold: {study.threshold:g}, reached when the mean of {study.threshold_window} consecutive training "
         "episodes reaches it (episodes to threshold: the last episode of the first such window; seeds that never "
         f"reach it count as {censored_at}, a lower bound).",
-        f"- Intervals: {_intervals(len(study.seeds))}; verdicts by the rule of [STUDIES.md](STUDIES.md).",
+        f"- Intervals: {_intervals(_fewest_seeds(results))}; verdicts by the rule of [STUDIES.md](STUDIES.md).",
         *_random_level_notes(results),
         *_short_budget_notes(study),
         *_step_budget_notes(results),
@@ -516,6 +516,11 @@ def settings_yaml(settings: dict[str, Any]) -> str:
         two share a value): what a reader pastes into a zoo file
     """
     return yaml.dump(settings, Dumper=_SettingsDumper, sort_keys=False).rstrip()
+
+
+def _fewest_seeds(results: StudyResults) -> int:
+    """:return: the fewest seeds found of a (reading, variant) (a partial run's), or the study's seeds if none is found"""
+    return min((len(seeds) for seeds in results.seeds.values()), default=len(results.study.seeds))
 
 
 def _band(n_seeds: int) -> str:
