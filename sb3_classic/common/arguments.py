@@ -151,14 +151,15 @@ def constructor_parameters(cls: type) -> dict[str, inspect.Parameter]:
     return parameters
 
 
-def check_keywords(cls: type, kwargs: Mapping[str, Any], others: Sequence[type] = ()) -> None:
+def check_keywords(cls: type, kwargs: Mapping[str, Any], family: type | None = None) -> None:
     """
     :param cls: a class about to be constructed
     :param kwargs: the keyword arguments of the call
-    :param others: classes whose arguments a user may give ``cls`` by mistake (the other algorithms of the package)
-    :raises TypeError: for a keyword its constructor does not take (Python's own error names no fix), naming the
-        class of ``others`` that takes it, if one does, and the closest argument ``cls`` takes. A constructor that
-        passes ``**kwargs`` on to ``object`` takes any keyword, and nothing is checked
+    :param family: the package's base class of ``cls`` (``ClassicOnPolicyAlgorithm``): its other subclasses in the
+        package are the algorithms whose arguments a user may give ``cls`` by mistake
+    :raises TypeError: for a keyword its constructor does not take (Python's own error names no fix), naming the other
+        algorithm that takes it, if one does, and the closest argument ``cls`` takes. A constructor that passes
+        ``**kwargs`` on to ``object`` takes any keyword, and nothing is checked
     """
     inits = [klass.__dict__["__init__"] for klass in cls.__mro__ if "__init__" in klass.__dict__]
     takes_any = all(
@@ -173,7 +174,14 @@ def check_keywords(cls: type, kwargs: Mapping[str, Any], others: Sequence[type] 
             public = [name for name in arguments if not name.startswith("_")]
             close = difflib.get_close_matches(key, public, n=1)
             hint = f"did you mean {close[0]!r}?" if close else f"{cls.__name__} takes {', '.join(public)}"
-            owners = [other.__name__ for other in others if key in constructor_parameters(other)]
+            others: list[type] = [] if family is None else family.__subclasses__()
+            owners = [
+                other.__name__
+                for other in others
+                if other.__module__.startswith("sb3_classic.")
+                and not issubclass(cls, other)
+                and key in constructor_parameters(other)
+            ]
             if owners:
                 hint = f"it is an argument of {' and '.join(owners)}, not of {cls.__name__}; {hint}"
             raise TypeError(f"{cls.__name__}() got an unexpected keyword argument {key!r}: {hint}")

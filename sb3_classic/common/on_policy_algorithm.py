@@ -125,9 +125,8 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
 
     def __new__(cls, *args: Any, **kwargs: Any) -> Any:
         # A misspelt argument (n_step=5) gets the closest one (n_steps), in Python and through rl-zoo3's -params
-        # (REINFORCE's argument given to NStepSARSA, or the other way round, says so)
-        others = [other for other in ClassicOnPolicyAlgorithm.__subclasses__() if other.__module__.startswith("sb3_classic.")]
-        check_keywords(cls, kwargs, [other for other in others if not issubclass(cls, other)])
+        # (and REINFORCE's argument given to NStepSARSA, or the other way round, says so)
+        check_keywords(cls, kwargs, ClassicOnPolicyAlgorithm)
         return super().__new__(cls)
 
     def __init__(

@@ -523,20 +523,24 @@ def _fewest_seeds(results: StudyResults) -> int:
     return min((len(seeds) for seeds in results.seeds.values()), default=len(results.study.seeds))
 
 
+def _too_few_seeds(n_seeds: int) -> str | None:
+    """:return: "2 seeds" where fewer than ``stats.MIN_SEEDS`` give no interval that holds at 95%, else None"""
+    return None if n_seeds >= stats.MIN_SEEDS else f"{n_seeds} seed{'s' * (n_seeds != 1)}"
+
+
 def _band(n_seeds: int) -> str:
-    """:return: what the figure's band over ``n_seeds`` seeds is: a 95% one from ``stats.MIN_SEEDS`` seeds on"""
-    if n_seeds >= stats.MIN_SEEDS:
-        return "95% bootstrap band"
-    return f"bootstrap band ({n_seeds} seed{'s' * (n_seeds != 1)}: too few for a 95% one)"
+    """:return: what the figure's band over ``n_seeds`` seeds is (``_too_few_seeds``)"""
+    few = _too_few_seeds(n_seeds)
+    return "95% bootstrap band" if few is None else f"bootstrap band ({few}: too few for a 95% one)"
 
 
 def _intervals(n_seeds: int) -> str:
-    """:return: what the report's intervals over ``n_seeds`` seeds are (``_band``)"""
+    """:return: what the report's intervals over ``n_seeds`` seeds are (``_too_few_seeds``)"""
     method = "bootstrap over seeds (`scipy.stats.bootstrap`, BCa)"
-    if n_seeds >= stats.MIN_SEEDS:
+    few = _too_few_seeds(n_seeds)
+    if few is None:
         return f"95% {method}"
-    seeds = f"{n_seeds} seed{'s' * (n_seeds != 1)}"
-    return f"{method}, at 95% but from {seeds}, too few for it to hold: every verdict is too close to call"
+    return f"{method}, at 95% but from {few}, too few for it to hold: every verdict is too close to call"
 
 
 def _random_level_notes(results: StudyResults) -> list[str]:

@@ -280,7 +280,6 @@ def untrained_note(claim: Claim, metrics: Mapping[str, Mapping[str, np.ndarray]]
         if low > high:
             return ""
     shown = " or ".join(sorted({levels[variant].format() for variant in variants}))
-    # (a run of fewer episodes: all of them)
     last = f"its last {LAST_EPISODES} episodes (all, in a shorter run)"
     if len(variants) == 1:
         what = f"{claim.variant}'s mean return over {last} is not"
