@@ -6,7 +6,7 @@ member stacked with its Adam state (``StackedPart``), and the end of ``learn`` f
 
 from collections.abc import Callable, Generator, Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any, Generic, Literal, Protocol, TypeVar, cast
+from typing import Any, Generic, Literal, TypeVar, cast
 
 import numpy as np
 import torch as th
@@ -18,7 +18,7 @@ from torch import nn
 
 from sb3_classic.common.arguments import constructor_parameters
 from sb3_classic.common.on_policy_algorithm import Update
-from sb3_classic.common.stacked import StackedAdam, StackedMLP, parametrized_layers
+from sb3_classic.common.stacked import StackedAdam, StackedMLP, clip_grad_norms_per_member, parametrized_layers
 from sb3_classic.common.threads import one_thread_unless_chosen
 from sb3_classic.common.utils import check_bool, check_positive_int
 
@@ -344,10 +344,13 @@ class StackedPart:
                 }
 
 
-class Trainer(Protocol):
+class Trainer:
     """
     An algorithm's stacked networks during one ``learn`` of its population (``NStepSARSAPopulation``'s q̂ and its
-    copies, ``REINFORCEPopulation``'s π and v̂): what the population's loop (``Lockstep``) asks of them.
+    copies, ``REINFORCEPopulation``'s π and v̂): what the population's loop (``Lockstep``) asks of them. Each algorithm
+    gives ``forward``, ``_gradient_step`` and ``close``; ``step`` is theirs in common.
+
+    :param models: the members
     """
 
     #: Whether a member whose rollout has nothing to train yet takes its next env step before the next stacked
@@ -355,22 +358,119 @@ class Trainer(Protocol):
     #: one env step per stacked step)
     steps_again: bool
 
+    def __init__(self, models: list[Any]) -> None:
+        self.models = models
+        self.device = models[0].device
+        #: the length of a flattened observation
+        self.features = int(np.prod(models[0].observation_space.shape or (1,)))
+        self.max_grad_norm = models[0].max_grad_norm
+
     def forward(self) -> Any:
         """
         :return: what chooses each member's actions at this env step, indexed by member (one stacked forward pass), as
             its model's ``_sample_actions`` takes it (``behaviour``)
         """
+        raise NotImplementedError
 
     def step(self, updates: dict[int, "MemberUpdate"]) -> list[int]:
         """
         One stacked gradient step of the members with an update in progress, each on the arguments of its own next
-        gradient step (``MemberUpdate.arguments``), each sent back what its model's ``_gradient_step`` would return.
+        gradient step (``MemberUpdate.arguments``: its ``_update``'s (S_t, A_t, …), its whole batch or its next
+        transition in time order), each sent back what its model's ``_gradient_step`` would return; the others are not
+        stepped.
 
+        :param updates: the members' updates in progress, by member
         :return: the members whose update this step finished
         """
+        if not updates:
+            return []
+        members = sorted(updates)
+        chunks = [updates[k].arguments for k in members]
+        lengths = np.array([len(chunk[1]) for chunk in chunks])
+        results = self._gradient_step(chunks, lengths, np.array(members))
+        return [k for k, result in zip(members, results, strict=True) if not updates[k].send(result)]
+
+    def _gradient_step(self, chunks: list[tuple[Any, ...]], lengths: np.ndarray, members: np.ndarray) -> list[Any]:
+        """
+        One stacked gradient step of the given members, each on the mean loss of its own chunk (its model's
+        ``_gradient_step``, the chunks side by side, ``side_by_side``).
+
+        :param chunks: the given members' arguments of their model's ``_gradient_step``, in member order
+        :param lengths: each chunk's steps or transitions, shape (M,)
+        :param members: the members, ascending, shape (M,)
+        :return: what each given member's ``_gradient_step`` would return, in member order
+        """
+        raise NotImplementedError
+
+    def subset(self, members: np.ndarray) -> th.Tensor | None:
+        """:return: the given members as an index of the stacked networks (``StackedMLP.forward``), None for all"""
+        return None if len(members) == len(self.models) else th.as_tensor(members, device=self.device)
 
     def close(self) -> None:
         """Hand each member its own parameters and optimizer states back."""
+        raise NotImplementedError
+
+
+def side_by_side(
+    chunks: Sequence[np.ndarray | None], lengths: np.ndarray, shape: tuple[int, ...], dtype: Any, fill: Any = 0
+) -> np.ndarray:
+    """
+    :param chunks: each member's values for its gradient step, its own count n first (an array that reshapes to
+        (n, *shape)); None: ``fill`` throughout
+    :param lengths: each chunk's count n, shape (M,)
+    :param shape: one value's shape, () for a number
+    :param dtype: the array's
+    :param fill: what the padding holds (0: it weighs nothing in the losses; True: every action legal)
+    :return: the chunks as the rows of one array, each padded to the longest, shape (M, max(lengths), *shape)
+    """
+    rows = np.full((len(chunks), int(lengths.max()), *shape), fill, dtype=dtype)
+    for row, (chunk, n) in enumerate(zip(chunks, lengths, strict=True)):
+        if chunk is not None:
+            rows[row, :n] = np.reshape(chunk, (n, *shape))
+    return rows
+
+
+def stacked_step(
+    parts: Sequence["StackedPart"],
+    loss: th.Tensor,
+    members: np.ndarray,
+    learning_rates: Sequence[np.ndarray],
+    max_grad_norm: float | None,
+) -> None:
+    """
+    The end of a stacked gradient step (each model's ``_gradient_step``'s): the backward pass of the sum of the members'
+    losses (member k's parameters get its own loss's gradient only), each network's gradient clipped to each member's
+    own norm where ``max_grad_norm`` is finite, then each network's Adam step of the given members.
+
+    :param parts: the networks trained
+    :param loss: the given members' losses summed
+    :param members: the members to step, shape (M,)
+    :param learning_rates: for each network, every member's learning rate, shape (K,)
+    :param max_grad_norm: the members' ``max_grad_norm``
+    """
+    for part in parts:
+        part.optimizer.zero_grad()
+    loss.backward()
+    for part, rates in zip(parts, learning_rates, strict=True):
+        if max_grad_norm is not None and np.isfinite(max_grad_norm):
+            clip_grad_norms_per_member(part.parameters, max_grad_norm)
+        part.optimizer.step(members, rates)
+
+
+def check_adam(name: str, optimizer: th.optim.Optimizer, label: str = "optimizer") -> None:
+    """
+    :param name: the member, for the message
+    :param optimizer: one of its optimizers
+    :param label: the optimizer's name, for the message
+    :raises TypeError: for another optimizer than Adam without weight decay, AMSGrad or ``maximize`` (``StackedAdam``)
+    """
+    group = optimizer.param_groups[0]
+    if type(optimizer) is not th.optim.Adam or group["weight_decay"] or group["amsgrad"] or group["maximize"]:
+        raise TypeError(
+            f"{name}: {label} {type(optimizer).__name__} with weight_decay={group.get('weight_decay')!r}, "
+            f"amsgrad={group.get('amsgrad')!r}, maximize={group.get('maximize')!r}: a population's optimizers are Adam "
+            "without weight decay, AMSGrad or maximize (StackedAdam); leave optimizer_class and those kwargs out"
+        )
 
 
 class MemberUpdate:

@@ -11,8 +11,17 @@ from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.torch_layers import FlattenExtractor
 from torch import nn
 
-from sb3_classic.common.population import MemberUpdate, Population, StackedPart, check_population, layer_parameters
-from sb3_classic.common.stacked import StackedMLP, clip_grad_norms_per_member
+from sb3_classic.common.population import (
+    Population,
+    StackedPart,
+    Trainer,
+    check_adam,
+    check_population,
+    layer_parameters,
+    side_by_side,
+    stacked_step,
+)
+from sb3_classic.common.stacked import StackedMLP
 from sb3_classic.reinforce.policies import REINFORCEPolicy
 from sb3_classic.reinforce.reinforce import REINFORCE, reinforce_losses, softmax_cdf
 
@@ -64,7 +73,7 @@ def _value_network(policy: REINFORCEPolicy) -> nn.Sequential:
     return nn.Sequential(*policy.mlp_extractor.value_net, policy.value_net)
 
 
-class _StackedPolicy:
+class _StackedPolicy(Trainer):
     """
     The stacked networks of the members of one ``learn`` call (the population's ``Trainer``): built from their
     weights, shared with them while they live, handed back by ``close``.
@@ -76,14 +85,12 @@ class _StackedPolicy:
     steps_again = False
 
     def __init__(self, models: list[REINFORCE]) -> None:
-        self.models = models
-        self.device = models[0].device
-        self.use_baseline = models[0].use_baseline
+        super().__init__(models)
         policies = [model.policy for model in models]
         networks = [_policy_network(policy) for policy in policies]
         self.policy = StackedPart(networks, [policy.optimizer for policy in policies], "π", self.device)
         self.value: StackedPart | None = None
-        if self.use_baseline:
+        if models[0].use_baseline:
             self.value = StackedPart(
                 [_value_network(policy) for policy in policies],
                 [policy.value_optimizer for policy in policies],  # type: ignore[misc]
@@ -91,13 +98,9 @@ class _StackedPolicy:
                 self.device,
             )
         first = models[0]
-        self.features = int(np.prod(first.observation_space.shape or (1,)))
         self.n_actions = int(first.action_space.n)  # type: ignore[attr-defined]
-        self.max_grad_norm = first.max_grad_norm
-        self.clip = self.max_grad_norm is not None and bool(np.isfinite(self.max_grad_norm))
         self.gamma, self.gamma_t_factor = first.gamma, first.gamma_t_factor
         self.normalize_advantage, self.ent_coef = first.normalize_advantage, first.ent_coef
-        self._all = th.arange(len(models), device=self.device)
         #: every member's current observations, flattened, refilled at each env step (one array, no stacking)
         self._observations = np.zeros((len(models), first.n_envs, self.features), dtype=np.float32)
 
@@ -109,108 +112,37 @@ class _StackedPolicy:
         """
         observations = self._observations
         for k, model in enumerate(self.models):
-            observations[k] = np.reshape(model._last_obs, observations.shape[1:])  # type: ignore[arg-type]
+            observations[k] = np.reshape(model._last_obs, observations.shape[1:])
         with th.no_grad():
             logits = self.policy.stacked(th.as_tensor(observations, device=self.device)).cpu().numpy()
         return list(zip(logits, softmax_cdf(logits), strict=True))
 
-    def step(self, updates: dict[int, MemberUpdate]) -> list[int]:
-        """
-        One stacked gradient step of each network: every member with an update in progress takes its next gradient step
-        (its ``_update``'s: its whole batch, or its next step in time order), each on the mean over its own steps; the
-        others are not stepped.
-
-        :param updates: the members' updates in progress, by member
-        :return: the members whose update this step finished
-        """
-        if not updates:
-            return []
-        members = sorted(updates)
-        chunks = [updates[k].arguments for k in members]
-        lengths = np.array([len(chunk[2]) for chunk in chunks])
-        n_members, width = len(members), int(lengths.max())
-        x = np.zeros((n_members, width, self.features), dtype=np.float32)
-        actions = np.zeros((n_members, width), dtype=np.int64)
-        returns = np.zeros((n_members, width), dtype=np.float32)
-        episode_steps = np.zeros((n_members, width), dtype=np.int64)
-        # (every action legal where no member's chunk has masks that make one illegal, and in the padding)
-        restricting = [chunk[4] is not None and not bool(chunk[4].all()) for chunk in chunks]
-        masks = np.ones((n_members, width, self.n_actions), dtype=bool) if any(restricting) else None
-        for row, (observations, member_actions, member_returns, steps, member_masks) in enumerate(chunks):
-            n = lengths[row]
-            if masks is not None and member_masks is not None:
-                masks[row, :n] = np.reshape(member_masks, (n, -1))
-            x[row, :n] = np.reshape(observations, (n, -1))
-            actions[row, :n] = np.reshape(member_actions, n)
-            returns[row, :n] = member_returns
-            episode_steps[row, :n] = steps
-        # α^θ and α^w of each member's update (set by its _update)
-        policy_lrs, value_lrs = np.zeros(len(self.models)), np.zeros(len(self.models))
-        for k in members:
-            policy = self.models[k].policy
-            policy_lrs[k] = policy.optimizer.param_groups[0]["lr"]
-            value_lrs[k] = 0.0 if policy.value_optimizer is None else policy.value_optimizer.param_groups[0]["lr"]
-        losses, values = self._gradient_step(
-            x, actions, returns, episode_steps, lengths, np.array(members), policy_lrs, value_lrs, masks
-        )
-        finished = []
-        # (each member's losses and values as views, unbound in one call per tensor rather than indexed per member)
-        member_values = values.unbind(0)
-        policy_losses, entropy_losses, value_losses = (loss.unbind(0) for loss in losses.unbind(0))
-        member_losses = zip(members, policy_losses, entropy_losses, value_losses, strict=True)
-        for row, (k, policy_loss, entropy_loss, value_loss) in enumerate(member_losses):
-            n = lengths[row]
-            # (what the member's _gradient_step returns)
-            result = dict(
-                policy_loss=policy_loss,
-                entropy_loss=entropy_loss,
-                value_loss=value_loss,
-                values=member_values[row] if n == width else member_values[row][:n],
-            )
-            if not updates[k].send(result):
-                finished.append(k)
-        return finished
-
     def _gradient_step(
-        self,
-        x: np.ndarray,
-        actions: np.ndarray,
-        returns: np.ndarray,
-        episode_steps: np.ndarray,
-        lengths: np.ndarray,
-        members: np.ndarray,
-        policy_lrs: np.ndarray,
-        value_lrs: np.ndarray,
-        action_masks: np.ndarray | None,
-    ) -> tuple[th.Tensor, th.Tensor]:
+        self, chunks: list[tuple[Any, ...]], lengths: np.ndarray, members: np.ndarray
+    ) -> list[dict[str, th.Tensor]]:
         """
-        One gradient step of each network of the given members, each on the mean over its own chunk of steps
-        (``REINFORCE._gradient_step``), the chunks padded to the longest.
+        One gradient step of each network of the given members, each on the mean over its own steps (S_t, A_t, G_t, t,
+        masks) (``REINFORCE._gradient_step``: its whole batch, or its next step in time order).
 
-        :param x: S_t of each given member, padded with zeros, shape (M, B, features)
-        :param actions: A_t, shape (M, B)
-        :param returns: G_t, shape (M, B)
-        :param episode_steps: t, shape (M, B)
-        :param lengths: each member's steps in its chunk (the rest is padding), shape (M,)
-        :param members: the members, shape (M,), ascending
-        :param policy_lrs: every member's α^θ, shape (K,)
-        :param value_lrs: every member's α^w, shape (K,)
-        :param action_masks: the legal actions at each step, shape (M, B, n_actions); None: every action legal
-        :return: each member's policy, entropy and value losses, shape (3, M), and v̂(S_t) before the step (zeros
-            without a baseline), shape (M, B), detached
+        :return: each given member's policy, entropy and value losses, and v̂(S_t) before the step (zeros without a
+            baseline), shape (n,), detached
         """
+        observations, actions, returns, episode_steps, action_masks = zip(*chunks, strict=True)
         device = self.device
-        index = self._all if len(members) == len(self.models) else th.as_tensor(members, device=device)
-        subset = None if len(members) == len(self.models) else index
-        obs = th.as_tensor(x, device=device)
-        returns_t = th.as_tensor(returns, device=device)
+        subset = self.subset(members)
+        obs = th.as_tensor(side_by_side(observations, lengths, (self.features,), np.float32), device=device)
+        returns_t = th.as_tensor(side_by_side(returns, lengths, (), np.float32), device=device)
         logits = self.policy.stacked(obs, subset)
-        masks = None if action_masks is None else th.as_tensor(action_masks, device=device)
-        if masks is not None:
+        # (every action legal where no member's chunk has masks that make one illegal, and in the padding)
+        if any(masks is not None and not bool(masks.all()) for masks in action_masks):
+            masks = th.as_tensor(side_by_side(action_masks, lengths, (self.n_actions,), bool, True), device=device)
             # sb3-contrib's MaskableCategorical: an illegal action's logit at -1e8, its probability 0
             logits = th.where(masks, logits, MASKED_LOGIT)
+        else:
+            masks = None
         log_probs = F.log_softmax(logits, dim=-1)
-        log_prob = log_probs.gather(2, th.as_tensor(actions, device=device).unsqueeze(-1)).squeeze(-1)
+        index = th.as_tensor(side_by_side(actions, lengths, (1,), np.int64), device=device)
+        log_prob = log_probs.gather(2, index).squeeze(-1)
         p_log_p = log_probs.exp() * log_probs
         # (an illegal action adds nothing to the entropy, as in MaskableCategorical)
         entropy = -(p_log_p if masks is None else th.where(masks, p_log_p, 0.0)).sum(-1)
@@ -220,32 +152,47 @@ class _StackedPolicy:
             entropy,
             values,
             returns_t,
-            th.as_tensor(episode_steps, device=device),
+            th.as_tensor(side_by_side(episode_steps, lengths, (), np.int64), device=device),
             self.gamma,
             self.gamma_t_factor,
             self.normalize_advantage,
             self.ent_coef,
             self.value is not None,
             # (one step each: no padding)
-            None if x.shape[1] == 1 else th.as_tensor(lengths, device=device),
+            None if obs.shape[1] == 1 else th.as_tensor(lengths, device=device),
         )
-        # A sum over members: member k's parameters get its own loss's gradient only
-        parts = [self.policy] if self.value is None else [self.policy, self.value]
-        for part in parts:
-            part.optimizer.zero_grad()
-        member_losses.total.sum().backward()
-        for part, learning_rates in zip(parts, (policy_lrs, value_lrs), strict=False):
-            if self.clip:
-                clip_grad_norms_per_member(part.parameters, self.max_grad_norm)
-            part.optimizer.step(members, learning_rates)
+        # α^θ and α^w of each member's update (set by its _update)
+        parts, learning_rates = [self.policy], [_learning_rates(self.models, "optimizer")]
+        if self.value is not None:
+            parts.append(self.value)
+            learning_rates.append(_learning_rates(self.models, "value_optimizer"))
+        stacked_step(parts, member_losses.total.sum(), members, learning_rates, self.max_grad_norm)
+        # (each member's losses and values as views, unbound in one call per tensor rather than indexed per member)
         losses = th.stack([member_losses.policy, member_losses.entropy, member_losses.value]).detach()
-        return losses, values.detach()
+        policy_losses, entropy_losses, value_losses = (loss.unbind(0) for loss in losses.unbind(0))
+        member_values = values.detach().unbind(0)
+        width = obs.shape[1]
+        # (what each member's _gradient_step returns)
+        return [
+            dict(
+                policy_loss=policy_losses[row],
+                entropy_loss=entropy_losses[row],
+                value_loss=value_losses[row],
+                values=member_values[row] if n == width else member_values[row][:n],
+            )
+            for row, n in enumerate(lengths)
+        ]
 
     def close(self) -> None:
         """Each member's parameters get storage of their own again, and its optimizers their slices' Adam states."""
         self.policy.close()
         if self.value is not None:
             self.value.close()
+
+
+def _learning_rates(models: list[REINFORCE], optimizer: str) -> np.ndarray:
+    """:return: each member's learning rate of ``policy.optimizer`` or ``policy.value_optimizer``, shape (K,)"""
+    return np.array([getattr(model.policy, optimizer).param_groups[0]["lr"] for model in models])
 
 
 def check_members(models: Sequence[Any]) -> None:
@@ -292,13 +239,7 @@ def _check_member(k: int, model: REINFORCE) -> None:
     for key, optimizer in optimizers.items():
         if optimizer is None:
             continue
-        group = optimizer.param_groups[0]
-        if type(optimizer) is not th.optim.Adam or group["weight_decay"] or group["amsgrad"] or group["maximize"]:
-            raise TypeError(
-                f"{name}: policy.{key} {type(optimizer).__name__} with weight_decay={group.get('weight_decay')!r}, "
-                f"amsgrad={group.get('amsgrad')!r}, maximize={group.get('maximize')!r}: a population's optimizers are "
-                "Adam without weight decay, AMSGrad or maximize (StackedAdam); leave optimizer_class and those kwargs out"
-            )
+        check_adam(name, optimizer, f"policy.{key}")
         trained = {id(parameter) for group in optimizer.param_groups for parameter in group["params"]}
         stacked = {id(parameter) for parameter in layer_parameters(networks[key])}
         if len(optimizer.param_groups) != 1 or trained != stacked:
