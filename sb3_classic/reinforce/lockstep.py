@@ -140,6 +140,8 @@ class _StackedPolicy(Trainer):
             logits = th.where(masks, logits, MASKED_LOGIT)
         else:
             masks = None
+        # log π and the entropy from one log-soft-max: the values of torch's Categorical, which SB3's and sb3-contrib's
+        # distributions (the member's own) wrap, to rounding; a Categorical of the stacked logits costs twice these calls
         log_probs = F.log_softmax(logits, dim=-1)
         index = th.as_tensor(side_by_side(actions, lengths, (1,), np.int64), device=device)
         log_prob = log_probs.gather(2, index).squeeze(-1)
