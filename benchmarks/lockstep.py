@@ -111,12 +111,13 @@ def population_of(models: list[Any]) -> REINFORCEPopulation | NStepSARSAPopulati
 
 
 #: The stacked calls of the populations: their forward passes for the members' actions (REINFORCE's with the softmax
-#: of its logits) and their gradient steps
+#: of its logits) and their gradient steps (the members' chunks laid side by side, the stacked networks' forward and
+#: backward passes and Adam steps; not the members' own code that each result is sent on to)
 STACKED_CALLS: tuple[tuple[Any, str], ...] = (
     (sarsa_lockstep._StackedQ, "forward"),
-    (sarsa_lockstep._StackedQ, "step"),
+    (sarsa_lockstep._StackedQ, "_gradient_step"),
     (reinforce_lockstep._StackedPolicy, "forward"),
-    (reinforce_lockstep._StackedPolicy, "step"),
+    (reinforce_lockstep._StackedPolicy, "_gradient_step"),
 )
 #: What ``floor`` clocks: the stacked calls and the members' envs
 CLOCKED: tuple[tuple[Any, str], ...] = (*STACKED_CALLS, (DummyVecEnv, "step_wait"))

@@ -240,7 +240,7 @@ def test_members_with_nothing_to_train_are_not_stepped() -> None:
     x = th.randn(3, 4, 3)
     learning_rates = np.full(3, 1e-2)
     for step in range(5):
-        # (in any order: a population passes its members as their updates came)
+        # (in any order: StackedAdam does not need them ascending)
         members = np.array([2, 0]) if step % 2 else np.array([1, 0, 2])
         optimizer.zero_grad()
         stacked(x)[members].square().sum().backward()

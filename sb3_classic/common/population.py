@@ -1,7 +1,8 @@
 """
 What the populations of both algorithms share (``NStepSARSAPopulation``, ``REINFORCEPopulation``: K models of one
 setting trained in lockstep): the checks of their members, each member's generator of action draws, a network of every
-member stacked with its Adam state (``StackedPart``), and the end of ``learn`` for each member.
+member stacked with its Adam state (``StackedPart``), the common part of a stacked gradient step (``Trainer.step``,
+``side_by_side``, ``stacked_step``), the loop (``Lockstep``) and the end of ``learn`` for each member.
 """
 
 from collections.abc import Callable, Generator, Iterator, Sequence
@@ -344,7 +345,11 @@ class StackedPart:
                 }
 
 
-class Trainer:
+#: The algorithm of a population's members
+ModelT = TypeVar("ModelT", bound=BaseAlgorithm)
+
+
+class Trainer(Generic[ModelT]):
     """
     An algorithm's stacked networks during one ``learn`` of its population (``NStepSARSAPopulation``'s q̂ and its
     copies, ``REINFORCEPopulation``'s π and v̂): what the population's loop (``Lockstep``) asks of them. Each algorithm
@@ -358,12 +363,12 @@ class Trainer:
     #: one env step per stacked step)
     steps_again: bool
 
-    def __init__(self, models: list[Any]) -> None:
+    def __init__(self, models: list[ModelT]) -> None:
         self.models = models
         self.device = models[0].device
         #: the length of a flattened observation
         self.features = int(np.prod(models[0].observation_space.shape or (1,)))
-        self.max_grad_norm = models[0].max_grad_norm
+        self.max_grad_norm: float | None = cast(Any, models[0]).max_grad_norm
 
     def forward(self) -> Any:
         """
@@ -386,6 +391,7 @@ class Trainer:
             return []
         members = sorted(updates)
         chunks = [updates[k].arguments for k in members]
+        # (each chunk's length from its A_t, one per transition: S_t may be a dict)
         lengths = np.array([len(chunk[1]) for chunk in chunks])
         results = self._gradient_step(chunks, lengths, np.array(members))
         return [k for k, result in zip(members, results, strict=True) if not updates[k].send(result)]
@@ -415,6 +421,8 @@ def side_by_side(
     chunks: Sequence[np.ndarray | None], lengths: np.ndarray, shape: tuple[int, ...], dtype: Any, fill: Any = 0
 ) -> np.ndarray:
     """
+    The members' chunks of one kind (S_t, A_t, targets, ...) as one array, a member a row.
+
     :param chunks: each member's values for its gradient step, its own count n first (an array that reshapes to
         (n, *shape)); None: ``fill`` throughout
     :param lengths: each chunk's count n, shape (M,)
@@ -455,6 +463,14 @@ def stacked_step(
         if max_grad_norm is not None and np.isfinite(max_grad_norm):
             clip_grad_norms_per_member(part.parameters, max_grad_norm)
         part.optimizer.step(members, rates)
+
+
+def learning_rates(optimizers: Sequence[th.optim.Optimizer]) -> np.ndarray:
+    """
+    :param optimizers: every member's optimizer of one network, in member order
+    :return: each one's learning rate as its update set it (its schedule and decay), shape (K,), float64
+    """
+    return np.array([optimizer.param_groups[0]["lr"] for optimizer in optimizers], dtype=np.float64)
 
 
 def check_adam(name: str, optimizer: th.optim.Optimizer, label: str = "optimizer") -> None:
@@ -504,10 +520,6 @@ class MemberUpdate:
         except StopIteration:
             return False
         return True
-
-
-#: The algorithm of a population's members
-ModelT = TypeVar("ModelT", bound=BaseAlgorithm)
 
 
 class Population(Generic[ModelT]):

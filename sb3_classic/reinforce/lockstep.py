@@ -18,6 +18,7 @@ from sb3_classic.common.population import (
     check_adam,
     check_population,
     layer_parameters,
+    learning_rates,
     side_by_side,
     stacked_step,
 )
@@ -73,7 +74,7 @@ def _value_network(policy: REINFORCEPolicy) -> nn.Sequential:
     return nn.Sequential(*policy.mlp_extractor.value_net, policy.value_net)
 
 
-class _StackedPolicy(Trainer):
+class _StackedPolicy(Trainer[REINFORCE]):
     """
     The stacked networks of the members of one ``learn`` call (the population's ``Trainer``): built from their
     weights, shared with them while they live, handed back by ``close``.
@@ -112,7 +113,7 @@ class _StackedPolicy(Trainer):
         """
         observations = self._observations
         for k, model in enumerate(self.models):
-            observations[k] = np.reshape(model._last_obs, observations.shape[1:])
+            observations[k] = np.reshape(model._last_obs, observations.shape[1:])  # type: ignore[arg-type]
         with th.no_grad():
             logits = self.policy.stacked(th.as_tensor(observations, device=self.device)).cpu().numpy()
         return list(zip(logits, softmax_cdf(logits), strict=True))
@@ -134,7 +135,7 @@ class _StackedPolicy(Trainer):
         returns_t = th.as_tensor(side_by_side(returns, lengths, (), np.float32), device=device)
         logits = self.policy.stacked(obs, subset)
         # (every action legal where no member's chunk has masks that make one illegal, and in the padding)
-        if any(masks is not None and not bool(masks.all()) for masks in action_masks):
+        if any(chunk_masks is not None and not bool(chunk_masks.all()) for chunk_masks in action_masks):
             masks = th.as_tensor(side_by_side(action_masks, lengths, (self.n_actions,), bool, True), device=device)
             # sb3-contrib's MaskableCategorical: an illegal action's logit at -1e8, its probability 0
             logits = th.where(masks, logits, MASKED_LOGIT)
@@ -164,11 +165,12 @@ class _StackedPolicy(Trainer):
             None if obs.shape[1] == 1 else th.as_tensor(lengths, device=device),
         )
         # α^θ and α^w of each member's update (set by its _update)
-        parts, learning_rates = [self.policy], [_learning_rates(self.models, "optimizer")]
+        policies = [model.policy for model in self.models]
+        parts, alphas = [self.policy], [learning_rates([policy.optimizer for policy in policies])]
         if self.value is not None:
             parts.append(self.value)
-            learning_rates.append(_learning_rates(self.models, "value_optimizer"))
-        stacked_step(parts, member_losses.total.sum(), members, learning_rates, self.max_grad_norm)
+            alphas.append(learning_rates([policy.value_optimizer for policy in policies]))  # type: ignore[misc]
+        stacked_step(parts, member_losses.total.sum(), members, alphas, self.max_grad_norm)
         # (each member's losses and values as views, unbound in one call per tensor rather than indexed per member)
         losses = th.stack([member_losses.policy, member_losses.entropy, member_losses.value]).detach()
         policy_losses, entropy_losses, value_losses = (loss.unbind(0) for loss in losses.unbind(0))
@@ -190,11 +192,6 @@ class _StackedPolicy(Trainer):
         self.policy.close()
         if self.value is not None:
             self.value.close()
-
-
-def _learning_rates(models: list[REINFORCE], optimizer: str) -> np.ndarray:
-    """:return: each member's learning rate of ``policy.optimizer`` or ``policy.value_optimizer``, shape (K,)"""
-    return np.array([getattr(model.policy, optimizer).param_groups[0]["lr"] for model in models])
 
 
 def check_members(models: Sequence[Any]) -> None:

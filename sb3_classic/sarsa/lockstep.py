@@ -15,6 +15,7 @@ from sb3_classic.common.population import (
     Trainer,
     check_adam,
     check_population,
+    learning_rates,
     side_by_side,
     stacked_step,
 )
@@ -58,7 +59,7 @@ class NStepSARSAPopulation(Population[NStepSARSA]):
         return -(-LOG_EVERY_STEPS // self.models[0].train_freq)
 
 
-class _StackedQ(Trainer):
+class _StackedQ(Trainer[NStepSARSA]):
     """
     The stacked q̂ of the members of one ``learn`` call (the population's ``Trainer``): built from their weights,
     shared with them while it lives, handed back by ``close``.
@@ -111,8 +112,8 @@ class _StackedQ(Trainer):
         target = th.as_tensor(side_by_side(targets, lengths, (), np.float32), device=device)
         # (one transition each: no padding)
         member_losses = sarsa_losses(q_predicted, target, self.huber, None if x.shape[1] == 1 else lengths)
-        learning_rates = np.array([model.policy.optimizer.param_groups[0]["lr"] for model in self.models])
-        stacked_step([self.q], member_losses.sum(), members, [learning_rates], self.max_grad_norm)
+        alphas = learning_rates([model.policy.optimizer for model in self.models])
+        stacked_step([self.q], member_losses.sum(), members, [alphas], self.max_grad_norm)
         q_values, losses = q_predicted.detach().cpu().numpy(), member_losses.detach().cpu().numpy()
         # (what each member's _gradient_step returns)
         return [(q_values[row, :n], float(losses[row])) for row, n in enumerate(lengths)]
