@@ -326,6 +326,11 @@ class StackedPart:
         assert self._optimizer is not None, "a network no optimizer trains has no StackedAdam"
         return self._optimizer
 
+    def learning_rates(self) -> np.ndarray:
+        """:return: each member's learning rate of this network as its update set it (schedule and decay), shape (K,)"""
+        assert self.optimizers is not None, "a network no optimizer trains has no learning rate"
+        return np.array([optimizer.param_groups[0]["lr"] for optimizer in self.optimizers], dtype=np.float64)
+
     def close(self) -> None:
         """Each member's parameters get storage of their own again, and its optimizer its slice's Adam state."""
         StackedMLP.own_storage(self.networks)
@@ -442,35 +447,26 @@ def stacked_step(
     parts: Sequence["StackedPart"],
     loss: th.Tensor,
     members: np.ndarray,
-    learning_rates: Sequence[np.ndarray],
     max_grad_norm: float | None,
 ) -> None:
     """
     The end of a stacked gradient step (each model's ``_gradient_step``'s): the backward pass of the sum of the members'
     losses (member k's parameters get its own loss's gradient only), each network's gradient clipped to each member's
-    own norm where ``max_grad_norm`` is finite, then each network's Adam step of the given members.
+    own norm where ``max_grad_norm`` is finite, then each network's Adam step of the given members, each at the
+    learning rate its update set (``StackedPart.learning_rates``).
 
     :param parts: the networks trained
     :param loss: the given members' losses summed
     :param members: the members to step, shape (M,)
-    :param learning_rates: for each network, every member's learning rate, shape (K,)
     :param max_grad_norm: the members' ``max_grad_norm``
     """
     for part in parts:
         part.optimizer.zero_grad()
     loss.backward()
-    for part, rates in zip(parts, learning_rates, strict=True):
+    for part in parts:
         if max_grad_norm is not None and np.isfinite(max_grad_norm):
             clip_grad_norms_per_member(part.parameters, max_grad_norm)
-        part.optimizer.step(members, rates)
-
-
-def learning_rates(optimizers: Sequence[th.optim.Optimizer]) -> np.ndarray:
-    """
-    :param optimizers: every member's optimizer of one network, in member order
-    :return: each one's learning rate as its update set it (its schedule and decay), shape (K,), float64
-    """
-    return np.array([optimizer.param_groups[0]["lr"] for optimizer in optimizers], dtype=np.float64)
+        part.optimizer.step(members, part.learning_rates())
 
 
 def check_adam(name: str, optimizer: th.optim.Optimizer, label: str = "optimizer") -> None:

@@ -18,7 +18,6 @@ from sb3_classic.common.population import (
     check_adam,
     check_population,
     layer_parameters,
-    learning_rates,
     side_by_side,
     stacked_step,
 )
@@ -164,13 +163,9 @@ class _StackedPolicy(Trainer[REINFORCE]):
             # (one step each: no padding)
             None if obs.shape[1] == 1 else th.as_tensor(lengths, device=device),
         )
-        # α^θ and α^w of each member's update (set by its _update)
-        policies = [model.policy for model in self.models]
-        parts, alphas = [self.policy], [learning_rates([policy.optimizer for policy in policies])]
-        if self.value is not None:
-            parts.append(self.value)
-            alphas.append(learning_rates([policy.value_optimizer for policy in policies]))  # type: ignore[misc]
-        stacked_step(parts, member_losses.total.sum(), members, alphas, self.max_grad_norm)
+        # π, and v̂ with a baseline, each member at the α^θ and α^w its _update set
+        parts = [self.policy] if self.value is None else [self.policy, self.value]
+        stacked_step(parts, member_losses.total.sum(), members, self.max_grad_norm)
         # (each member's losses and values as views, unbound in one call per tensor rather than indexed per member)
         losses = th.stack([member_losses.policy, member_losses.entropy, member_losses.value]).detach()
         policy_losses, entropy_losses, value_losses = (loss.unbind(0) for loss in losses.unbind(0))

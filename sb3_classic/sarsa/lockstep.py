@@ -15,7 +15,6 @@ from sb3_classic.common.population import (
     Trainer,
     check_adam,
     check_population,
-    learning_rates,
     side_by_side,
     stacked_step,
 )
@@ -112,8 +111,7 @@ class _StackedQ(Trainer[NStepSARSA]):
         target = th.as_tensor(side_by_side(targets, lengths, (), np.float32), device=device)
         # (one transition each: no padding)
         member_losses = sarsa_losses(q_predicted, target, self.huber, None if x.shape[1] == 1 else lengths)
-        alphas = learning_rates([model.policy.optimizer for model in self.models])
-        stacked_step([self.q], member_losses.sum(), members, [alphas], self.max_grad_norm)
+        stacked_step([self.q], member_losses.sum(), members, self.max_grad_norm)
         q_values, losses = q_predicted.detach().cpu().numpy(), member_losses.detach().cpu().numpy()
         # (what each member's _gradient_step returns)
         return [(q_values[row, :n], float(losses[row])) for row, n in enumerate(lengths)]
