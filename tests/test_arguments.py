@@ -2,7 +2,7 @@
 Arguments: values a YAML or another library's habit gives, which would be taken silently or fail far from their cause,
 are refused at construction with the argument's name, and their valid neighbours are accepted; a constant
 initialisation of a CNN and a policy class of another algorithm are named as such; ``learn(0)`` returns the model
-unchanged.
+unchanged, and a negative count is refused.
 """
 
 import copy
@@ -171,3 +171,22 @@ def test_learn_zero_steps_returns_the_model_unchanged(model_class: type[BaseAlgo
     assert model.num_timesteps == (steps if not reset_num_timesteps else 0)
     assert parameters_equal(model.get_parameters(), before)
     model.learn(64, reset_num_timesteps=False)  # and it goes on training
+
+
+@pytest.mark.parametrize("model_class", MODEL_LIST)
+@pytest.mark.parametrize("reset_num_timesteps", [True, False])
+def test_learn_refuses_a_negative_step_count(model_class: type[BaseAlgorithm], reset_num_timesteps: bool) -> None:
+    # SB3's loop returned at once and silently; 0 stays allowed (above), and so does a float count such as 1e5
+    model = make_model(model_class, seed=0)
+    model.learn(64)
+    before = copy.deepcopy(model.get_parameters())
+    steps = model.num_timesteps
+    with pytest.raises(ValueError, match=r"total_timesteps=-5 must be >= 0"):
+        model.learn(-5, reset_num_timesteps=reset_num_timesteps)
+    with pytest.raises(TypeError, match=r"total_timesteps='100' must be a number"):
+        model.learn("100")  # type: ignore[arg-type]
+    # Nothing was reset: the model goes on where it was
+    assert model.num_timesteps == steps
+    assert parameters_equal(model.get_parameters(), before)
+    model.learn(64.0, reset_num_timesteps=False)  # type: ignore[arg-type]
+    assert model.num_timesteps >= steps + 64

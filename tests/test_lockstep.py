@@ -380,6 +380,13 @@ def test_a_bad_use_masking_is_refused_before_anything_changes() -> None:
         assert all(p.is_contiguous() and p.untyped_storage().nbytes() == p.numel() * 4 for p in member.policy.parameters())
 
 
+def test_a_negative_step_count_is_refused_before_anything_changes() -> None:
+    members = [make_member(seed) for seed in (0, 1)]
+    with pytest.raises(ValueError, match=r"total_timesteps=-5 must be >= 0"):
+        NStepSARSAPopulation(members).learn(-5)
+    assert all(member.num_timesteps == 0 and member._last_obs is None for member in members)
+
+
 def test_a_member_is_saved_after_learn_not_during_it(tmp_path: Path) -> None:
     """While the population trains, a member's Adam state is the population's: a save then is refused, not stale."""
     from stable_baselines3.common.callbacks import CheckpointCallback

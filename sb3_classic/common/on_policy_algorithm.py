@@ -41,7 +41,7 @@ from sb3_classic.common.masking import (
 from sb3_classic.common.policies import action_offset
 from sb3_classic.common.save_util import SafeSaveLoadMixin, env_id, episodes_not_continued, other_env_message
 from sb3_classic.common.schedules import StepDecay
-from sb3_classic.common.utils import check_bool, check_positive_int
+from sb3_classic.common.utils import check_bool, check_positive_int, check_total_timesteps
 
 SelfClassicOnPolicyAlgorithm = TypeVar("SelfClassicOnPolicyAlgorithm", bound="ClassicOnPolicyAlgorithm")
 
@@ -644,6 +644,8 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
         tb_log_name: str = "run",
         progress_bar: bool = False,
     ) -> tuple[int, BaseCallback]:
+        # Before anything is reset (a population's members start here too): SB3's loop would return at once, silently
+        check_total_timesteps("total_timesteps", total_timesteps)
         if not reset_num_timesteps and self._last_obs is not None:
             reason = episodes_not_continued(self, self.rollout_buffer.episode_length)
             if reason is not None:

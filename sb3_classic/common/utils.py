@@ -56,6 +56,19 @@ def check_positive_int(name: str, value: Any, hint: str = "") -> None:
         raise ValueError(f"{name}={value!r} must be an integer >= 1{'. ' + hint if hint else ''}")
 
 
+def check_total_timesteps(name: str, value: Any) -> None:
+    """
+    :param name: the argument's name (``learn``'s ``total_timesteps``)
+    :param value: env steps to train for: a number >= 0 (0 sets the model up without training, as SB3's ``learn(0)``)
+    """
+    # Any real number (NumPy's included, and a float such as 1e5, which SB3's loop takes), not a bool
+    number = isinstance(value, numbers.Real) and not isinstance(value, bool)
+    if not number:
+        raise TypeError(f"{name}={value!r} must be a number of env steps >= 0, e.g. {name}=10_000")
+    if not value >= 0:
+        raise ValueError(f"{name}={value!r} must be >= 0: the env steps to train for (0 sets the model up without training)")
+
+
 def check_choice(name: str, value: Any, choices: Sequence[str], hint: str = "") -> None:
     """
     :param name: the argument's name
