@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 import torch as th
+from stable_baselines3 import A2C
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.envs import FakeImageEnv
 from stable_baselines3.common.policies import ActorCriticPolicy
@@ -39,8 +40,7 @@ REFUSED_INPUTS = [
     (REINFORCE, dict(td_lambda=0.5), TypeError, "'td_lambda': it is an argument of NStepSARSA, not of REINFORCE; REINFO"),
     # (A2C's and PPO's rollout length: REINFORCE's own arguments are listed, n_episodes among them)
     (REINFORCE, dict(n_steps=5), TypeError, "not of REINFORCE; REINFORCE takes policy, env, learning_rate, value_learning"),
-    # SB3's form before 1.8, which A2C still takes with a warning: the error says what to write instead
-    (REINFORCE, dict(policy_kwargs=dict(net_arch=[dict(pi=[32], vf=[16])])), ValueError, "write net_arch={'pi': [32], 'vf'"),
+    # SB3's form before 1.8 with shared layers, which A2C cannot convert either: the error says what to write instead
     (REINFORCE, dict(policy_kwargs=dict(net_arch=[8, dict(pi=[32], vf=[16])])), ValueError, "no shared layers"),
     (NStepSARSA, dict(policy_kwargs=dict(activation_fn="relu")), TypeError, "activation_fn='relu'"),
     (REINFORCE, dict(policy_kwargs=dict(activation_fn=th.nn.ReLU())), TypeError, "activation_fn=ReLU()"),
@@ -135,6 +135,18 @@ def test_their_valid_neighbours_are_accepted(model_class: type[BaseAlgorithm], k
     make_model(model_class, **kwargs).learn(32)
 
 
+@pytest.mark.parametrize("model_class", [A2C, REINFORCE])
+def test_sb3s_older_net_arch_is_converted_with_its_warning_as_a2c_converts_it(model_class: type[Any]) -> None:
+    # REINFORCE refused [dict(pi=..., vf=...)], which A2C and PPO take with SB3's deprecation warning
+    sb3_warning = "net_arch=dict(pi=..., vf=...) instead of net_arch=[dict(pi=..., vf=...)]"
+    with pytest.warns(UserWarning, match=re.escape(sb3_warning)):
+        model = model_class("MlpPolicy", "CartPole-v1", policy_kwargs=dict(net_arch=[dict(pi=[32], vf=[16])]), device="cpu")
+    assert model.policy.net_arch == dict(pi=[32], vf=[16])
+    assert [layer.out_features for layer in model.policy.mlp_extractor.policy_net if isinstance(layer, th.nn.Linear)] == [32]
+    assert [layer.out_features for layer in model.policy.mlp_extractor.value_net if isinstance(layer, th.nn.Linear)] == [16]
+    model.learn(32)
+
+
 @pytest.mark.parametrize("model_class", MODEL_LIST)
 def test_a_constant_init_of_a_cnn_names_its_features_extractor(model_class: type[BaseAlgorithm]) -> None:
     # CnnPolicy with net_arch=[] was told to pass net_arch=[]: the hidden layers are NatureCNN's
@@ -184,9 +196,9 @@ def test_learn_refuses_a_negative_step_count(model_class: type[BaseAlgorithm], r
     with pytest.raises(ValueError, match=r"total_timesteps=-5 must be >= 0"):
         model.learn(-5, reset_num_timesteps=reset_num_timesteps)
     with pytest.raises(TypeError, match=r"total_timesteps='100' must be a number"):
-        model.learn("100")  # type: ignore[arg-type]
+        model.learn("100")
     # Nothing was reset: the model goes on where it was
     assert model.num_timesteps == steps
     assert parameters_equal(model.get_parameters(), before)
-    model.learn(64.0, reset_num_timesteps=False)  # type: ignore[arg-type]
+    model.learn(64.0, reset_num_timesteps=False)
     assert model.num_timesteps >= steps + 64

@@ -49,7 +49,8 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
     :param action_space: action space
     :param lr_schedule: learning-rate schedule of the policy network (α^θ)
     :param value_lr_schedule: learning-rate schedule of the value network (α^w); ``lr_schedule`` if None
-    :param net_arch: hidden layers, e.g. ``[64, 64]`` for both networks or ``dict(pi=[64, 64], vf=[256])``
+    :param net_arch: hidden layers, e.g. ``[64, 64]`` for both networks or ``dict(pi=[64, 64], vf=[256])`` (SB3's
+        older ``[dict(pi=..., vf=...)]`` is converted with SB3's deprecation warning, as A2C and PPO convert it)
     :param activation_fn: activation class of the hidden layers
     :param activation_kwargs: arguments of ``activation_fn``, e.g. ``dict(negative_slope=0.1)`` for ``nn.LeakyReLU``
     :param weight_init: ``"orthogonal"`` (SB3's A2C/PPO scheme), ``"kaiming"`` (He initialisation of the hidden
@@ -93,7 +94,10 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         optimizer_kwargs: dict[str, Any] | None = None,
     ):
         check_weight_init(weight_init)
-        check_net_arch(net_arch, keys=("pi", "vf"))
+        # SB3's form before 1.8, [dict(pi=..., vf=...)]: ActorCriticPolicy converts it with its deprecation warning, as
+        # for A2C and PPO (a list with shared layers before the dict, which it cannot convert, is refused)
+        legacy = isinstance(net_arch, list) and len(net_arch) == 1 and isinstance(net_arch[0], dict)
+        check_net_arch(net_arch[0] if legacy else net_arch, keys=("pi", "vf"))  # type: ignore[index]
         check_bool("with_bias", with_bias)
         check_bool("use_baseline", use_baseline)
         # SB3's ActorCriticPolicy takes their truth: share_features_extractor="False" would share it
