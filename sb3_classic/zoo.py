@@ -16,7 +16,9 @@ What ``register()`` changes in rl-zoo3, and nothing else:
   still wins), and, for them, sets PyTorch to one thread on the CPU unless the user chose a number: see
   ``one_thread_unless_chosen``;
 - ``ExperimentManager._preprocess_schedules`` also reads ``value_learning_rate`` (REINFORCE's second learning rate)
-  as the zoo reads ``learning_rate``: ``lin_0.01`` for a linear schedule;
+  as the zoo reads ``learning_rate``: ``lin_0.01`` for a linear schedule; and it refuses a number that YAML read as a
+  string (``learning_rate: 1e-3``, which needs ``!!float 1e-3``), naming the setting and the fix, where the zoo failed
+  with "not enough values to unpack" (or passed the string on);
 - ``ExperimentManager.create_callbacks``, for these two algorithms, builds sb3-contrib's ``MaskableEvalCallback``
   instead of SB3's ``EvalCallback`` when the evaluation env has action masks (``--eval-freq`` evaluates with them);
 - ``rl_zoo3.create_test_env`` (the name ``enjoy`` imports) remembers an env it makes that has action masks, and a model
@@ -370,14 +372,38 @@ def _patch_experiment_manager(manager: type) -> None:
     manager.__init__ = __init__  # type: ignore[misc]
 
 
-def _patch_value_learning_rate(manager: type) -> None:
-    """Make ``ExperimentManager`` read ``value_learning_rate`` as it reads ``learning_rate`` (``lin_0.01``)."""
+def yaml_float_string(value: Any) -> str | None:
+    """
+    :param value: a setting as PyYAML read it
+    :return: for a number that PyYAML read as a string (``1e-3``: YAML 1.1's floats need a dot, ``1.0e-3``), what
+        to write instead (``!!float 1e-3``, or ``0.001``); else None
+    """
+    if not isinstance(value, str):
+        return None
+    try:
+        number = float(value)
+    except ValueError:
+        return None
+    return f"{value!r} is read as a string by YAML: write !!float {value}, or {number!r}"
+
+
+def _patch_preprocess_schedules(manager: type) -> None:
+    """
+    Make ``ExperimentManager`` read ``value_learning_rate`` as it reads ``learning_rate`` (``lin_0.01``), and refuse a
+    number that YAML read as a string (``learning_rate: 1e-3``) with the setting's name and the fix
+    (``yaml_float_string``): the zoo split it as a schedule's name (``not enough values to unpack``) or passed it on.
+    """
     original = manager._preprocess_schedules  # type: ignore[attr-defined]
     if getattr(original, _PATCHED, False):
         return
 
     @functools.wraps(original)
     def _preprocess_schedules(hyperparams: dict[str, Any]) -> dict[str, Any]:
+        # Every setting of the entry (the zoo's YAML and -params) passes here once, before the zoo reads any
+        for key, value in hyperparams.items():
+            fix = yaml_float_string(value)
+            if fix is not None:
+                raise ValueError(f"{key}: {fix} (in the hyperparameters of rl-zoo3's YAML or -params)")
         hyperparams = original(hyperparams)
         value = hyperparams.get("value_learning_rate")
         if isinstance(value, (str, int, float)):
@@ -537,6 +563,6 @@ def register() -> None:
     samplers.update(SAMPLERS)
     converters.update(CONVERTERS)
     _patch_experiment_manager(manager)
-    _patch_value_learning_rate(manager)
+    _patch_preprocess_schedules(manager)
     _patch_eval_callback(manager, exp_manager)
     _patch_enjoy(zoo_package)

@@ -149,7 +149,10 @@ def test_readings_reinterpret_only_the_settings_a_variant_has(tmp_path: Path) ->
             ("train_freq: 1", "train_frequency: 1"),
             ["hyperparams.train_frequency: nstep_sarsa has no argument", "'train_freq'"],
         ),
-        (("learning_rate: !!float 1e-3", "learning_rate: 1e-3"), ["hyperparams.learning_rate: '1e-3' is read as a string"]),
+        (
+            ("learning_rate: !!float 1e-3", "learning_rate: 1e-3"),
+            ["hyperparams.learning_rate: '1e-3' is read as a string by YAML: write !!float 1e-3, or 0.001"],
+        ),
         (("budget: {episodes: 6}", "budget: {episodes: -6}"), ["budget.episodes: -6 is not a positive integer"]),
         (("others: [n1]", "others: [n2]"), ["claim.others: 'n2' is not a variant"]),
         (("kind: better", "kind: beats"), ["claim.kind: 'beats': choose one of better, similar, reaches, below"]),

@@ -295,6 +295,26 @@ def test_value_learning_rate_is_read_like_learning_rate() -> None:
     assert "value_learning_rate" not in ExperimentManager._preprocess_schedules({"learning_rate": 0.1})
 
 
+def test_a_number_yaml_reads_as_a_string_is_named_with_the_fix(tmp_path: Path) -> None:
+    # learning_rate: 1e-3 (no dot) is a string to PyYAML: the zoo split it as a schedule's name, "not enough values to
+    # unpack (expected 2, got 1)"
+    from rl_zoo3.exp_manager import ExperimentManager
+
+    fix = "'1e-3' is read as a string by YAML: write !!float 1e-3, or 0.001"
+    with pytest.raises(ValueError, match=re.escape(f"learning_rate: {fix}")):
+        ExperimentManager._preprocess_schedules({"learning_rate": "1e-3", "n_steps": 3})
+    with pytest.raises(ValueError, match=re.escape("value_learning_rate: '5e-3' is read as a string by YAML")):
+        ExperimentManager._preprocess_schedules({"value_learning_rate": "5e-3"})
+    # The names of schedules and other strings are the zoo's to read
+    assert ExperimentManager._preprocess_schedules({"learning_rate": "lin_1e-3"})["learning_rate"](0.5) == 5e-4
+    conf = tmp_path / "mine.yml"
+    conf.write_text("CartPole-v1:\n  n_timesteps: 64\n  policy: MlpPolicy\n  learning_rate: 1e-3\n")
+    result = zoo(tmp_path, "train", "--algo", "reinforce", "--env", "CartPole-v1", "-conf", str(conf), check=False)
+    assert result.returncode != 0
+    last_line = result.stderr.splitlines()[-1]
+    assert last_line.endswith(f"learning_rate: {fix} (in the hyperparameters of rl-zoo3's YAML or -params)"), last_line
+
+
 def test_register_checks_the_zoo_before_changing_anything(monkeypatch: pytest.MonkeyPatch) -> None:
     import rl_zoo3
     import rl_zoo3.hyperparams_opt

@@ -53,7 +53,7 @@ from sb3_classic.harness.common import (
     unknown_setting,
 )
 from sb3_classic.harness.lockstep import plan_lockstep
-from sb3_classic.zoo import YAML_NAMES
+from sb3_classic.zoo import YAML_NAMES, yaml_float_string
 
 METRICS = ("mean_return", "last_100_return", "episodes_to_threshold")
 CLAIM_KINDS = ("better", "similar", "reaches", "below")
@@ -428,12 +428,10 @@ class _Checker:
         """:return: whether a number written as a string was found (and said)"""
         # YAML reads 1e-3 (no dot) as a string, and the zoo would pass it on as one
         if isinstance(value, str):
-            try:
-                float(value)
-            except ValueError:
-                return False
-            self.fail(where, f"{value!r} is read as a string by YAML: write !!float {value}, or {float(value)!r}")
-            return True
+            fix = yaml_float_string(value)
+            if fix is not None:
+                self.fail(where, fix)
+            return fix is not None
         if isinstance(value, Mapping):
             return any([self.float_strings(f"{where}.{key}", item) for key, item in value.items()])
         if isinstance(value, list):
