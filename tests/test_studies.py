@@ -7,6 +7,7 @@ import hashlib
 import inspect
 import io
 import json
+import math
 import re
 import shlex
 import shutil
@@ -1068,14 +1069,17 @@ def test_a_tiny_study_runs_end_to_end(tmp_path: Path) -> None:
     assert f"`{expected}`" in (results / "STUDIES.md").read_text()
 
 
-#: A study of an env of one's own (``tests/chain_env.py`` registers it when imported), with its env_kwargs
+#: The metrics of a study without a threshold
+METRICS_ON_RETURNS = ("mean_return", "last_100_return")
+
+#: A study of an env of one's own (``tests/chain_env.py`` registers it when imported), with its env_kwargs; no
+#: threshold (the env registers no reward_threshold, and no claim reads one)
 CHAIN = """
 title: Chain
 env: chain_env:ShortChain-v0
 algo: nstep_sarsa
 seeds: 2
 budget: {episodes: 4}
-threshold: -3
 hyperparams:
   policy: MlpPolicy
   env_kwargs: {length: 3}
@@ -1085,7 +1089,6 @@ hyperparams:
   policy_kwargs: {net_arch: [8]}
 vary: {n_steps: [1, 2]}
 claim: {text: "n = 2 beats n = 1", kind: better, variant: n_steps=2, others: [n_steps=1]}
-threshold_window: 2
 """
 
 
@@ -1109,7 +1112,17 @@ def test_a_study_of_ones_own_env_runs_end_to_end(tmp_path: Path, capsys: pytest.
         assert len(pd.read_csv(run_dir / "episodes.csv")) == 4
         # A deterministic policy on a chain of 3 states: it reaches the end in 2 steps, or never in its 20
         assert set(pd.read_csv(run_dir / "evaluations.csv")["return"]) <= {-2.0, -20.0}
-    assert "A uniformly random policy's return on the env" in (results / "chain.md").read_text()
+    page = (results / "chain.md").read_text()
+    assert "A uniformly random policy's return on the env" in page
+    # Without a threshold, no episodes to threshold: not measured, nor shown as if it were
+    assert "- No threshold: no claim reads one, and episodes to threshold is not measured" in page
+    (header,) = (line for line in page.splitlines() if line.startswith("| Variant |"))
+    assert header == "| Variant | Seeds | Episodes | " + " | ".join(stats.METRIC_LABELS[m] for m in METRICS_ON_RETURNS) + " |"
+    assert "Threshold:" not in page
+    for table in ("chain.csv", "chain-seeds.csv"):
+        columns = set(pd.read_csv(results / table).columns)
+        assert "mean_return" in columns
+        assert not {"episodes_to_threshold", "reached", "seeds_reaching"} & columns, table
     capsys.readouterr()
     assert studies_cli.main([*command, "--list"]) == 0
     assert "4 runs, 4 cached" in capsys.readouterr().out
@@ -1160,5 +1173,41 @@ def test_the_threshold_defaults_to_gymnasiums(tmp_path: Path) -> None:
     """An env the harness has no threshold for takes its spec's ``reward_threshold``; one without any must say it."""
     mountain_car = load_study(write_study(tmp_path, TINY.replace("env: CartPole-v1", "env: MountainCar-v0")))
     assert mountain_car.threshold == -110.0  # MountainCar-v0's reward_threshold
-    with pytest.raises(StudyError, match="threshold"):
-        load_study(write_study(tmp_path, TINY.replace("env: CartPole-v1", "env: Pendulum-v1"), "pendulum.yml"))
+    on_episodes = TINY.replace("env: CartPole-v1", "env: Pendulum-v1").replace("others: [n1]", "others: [n1], " + TO_THRESHOLD)
+    needs = "threshold: missing: give the return that counts as solved on Pendulum-v1, a finite number (claim.metric"
+    with pytest.raises(StudyError, match=re.escape(needs)):
+        load_study(write_study(tmp_path, on_episodes, "pendulum.yml"))
+
+
+#: A claim that reads the study's threshold
+TO_THRESHOLD = "metric: episodes_to_threshold"
+
+
+def test_a_threshold_is_needed_only_by_the_claims_that_read_it(tmp_path: Path) -> None:
+    # A study of one's own env (no reward_threshold) that claims on returns was refused for lacking one
+    chain = CHAIN
+    assert math.isnan(load_study(write_study(tmp_path, chain, "returns.yml")).threshold)
+    # A claim on episodes to threshold, or a level claim without its value, needs it: the message says what reads it
+    # and, the env having no reward_threshold, a random policy's returns on it (CartPole-v1's 475 was suggested)
+    cases = {
+        "episodes.yml": (
+            chain.replace("others: [n_steps=1]", f"others: [n_steps=1], {TO_THRESHOLD}"),
+            "claim.metric episodes_to_threshold",
+        ),
+        "level.yml": (
+            chain.replace("kind: better, variant: n_steps=2, others: [n_steps=1]", "kind: reaches, variant: n_steps=2"),
+            "claim, a 'reaches' claim without value,",
+        ),
+    }
+    for name, (text, reader) in cases.items():
+        with pytest.raises(StudyError) as raised:
+            load_study(write_study(tmp_path, text, name))
+        message = str(raised.value)
+        assert "threshold: missing: give the return that counts as solved on chain_env:ShortChain-v0" in message
+        assert f"({reader} needs it); the env registers no reward_threshold" in message
+        assert re.search(
+            r"above a uniformly random policy's mean return on it, -[\d.]+ \(100 episodes, from -20 to -\d+\)", message
+        )
+        assert "475" not in message
+        assert "None" not in message
+        assert message.count("\n  ") == 1, message  # one problem (the level claim's value says nothing of its own)

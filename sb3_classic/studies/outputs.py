@@ -158,36 +158,51 @@ def study_command(study: StudySpec, extra: Sequence[str] = (), program: str = PR
     return shlex.join(["python", "-m", program, shown, *extra])
 
 
+def has_threshold(study: StudySpec) -> bool:
+    """:return: whether the study has a threshold (one without: NaN, where no claim reads it, ``spec.load_study``)"""
+    return math.isfinite(study.threshold)
+
+
+def shown_metrics(study: StudySpec) -> list[str]:
+    """:return: the metrics of ``stats.METRIC_LABELS`` the study's outputs give: episodes to threshold where it has one"""
+    return [metric for metric in stats.METRIC_LABELS if has_threshold(study) or metric != "episodes_to_threshold"]
+
+
 def seeds_frame(results: StudyResults) -> pd.DataFrame:
     """
     :return: one row per run found: reading, variant, seed, each metric of the seed and whether it reached the
-        threshold (the values the intervals and verdicts are computed from)
+        threshold (the values the intervals and verdicts are computed from; a study without a threshold has neither
+        episodes to threshold nor ``reached``)
     """
+    metric_names = shown_metrics(results.study)
+    reached = ["reached"] if has_threshold(results.study) else []
     rows = []
     for (reading, variant), metrics in results.metrics.items():
         for index, seed in enumerate(results.seeds[(reading, variant)]):
             row: dict[str, Any] = {"reading": reading, "variant": variant, "seed": seed}
-            row |= {metric: float(metrics[metric][index]) for metric in stats.METRIC_LABELS}
-            row["reached"] = bool(metrics["reached"][index])
+            row |= {metric: float(metrics[metric][index]) for metric in metric_names}
+            row |= {name: bool(metrics[name][index]) for name in reached}
             rows.append(row)
-    return pd.DataFrame(rows, columns=["reading", "variant", "seed", *stats.METRIC_LABELS, "reached"])
+    return pd.DataFrame(rows, columns=["reading", "variant", "seed", *metric_names, *reached])
 
 
 def summary_frame(results: StudyResults) -> pd.DataFrame:
     """
     :return: one row per (reading, variant): seeds, the fewest and most episodes a seed completed (``episodes``,
         ``episodes_max``: equal with a budget in episodes), and each metric's mean over seeds with its bootstrap interval
-        (95%; from fewer than ``stats.MIN_SEEDS`` seeds, not one that holds)
+        (95%; from fewer than ``stats.MIN_SEEDS`` seeds, not one that holds), and the seeds that reached the threshold
+        (a study without a threshold: neither these nor episodes to threshold)
     """
     rows = []
     for (reading, variant), metrics in results.metrics.items():
         row: dict[str, Any] = {"reading": reading, "variant": variant, "seeds": len(results.seeds[(reading, variant)])}
         counts = results.episode_counts[(reading, variant)]
         row["episodes"], row["episodes_max"] = min(counts), max(counts)
-        for metric in stats.METRIC_LABELS:
+        for metric in shown_metrics(results.study):
             value = stats.interval(metrics[metric])
             row[metric], row[f"{metric}_low"], row[f"{metric}_high"] = value.estimate, value.low, value.high
-        row["seeds_reaching"] = int(metrics["reached"].sum())
+        if has_threshold(results.study):
+            row["seeds_reaching"] = int(metrics["reached"].sum())
         rows.append(row)
     return pd.DataFrame(rows)
 
@@ -196,18 +211,21 @@ def markdown_table(results: StudyResults) -> str:
     """:return: the study's table in markdown (estimates with their 95% intervals)"""
     frame = summary_frame(results)
     readings = len(results.study.readings) > 1
+    metric_names, reaching = shown_metrics(results.study), has_threshold(results.study)
     header = ["Reading"] if readings else []
-    header += ["Variant", "Seeds", "Episodes", *stats.METRIC_LABELS.values(), "Seeds reaching"]
+    header += ["Variant", "Seeds", "Episodes", *(stats.METRIC_LABELS[metric] for metric in metric_names)]
+    header += ["Seeds reaching"] if reaching else []
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for row in frame.itertuples(index=False):
         values = row._asdict()
         cells = [values["reading"]] if readings else []
         fewest, most = values["episodes"], values["episodes_max"]
         cells += [f"`{values['variant']}`", str(values["seeds"]), str(fewest) if fewest == most else f"{fewest}–{most}"]
-        for metric in stats.METRIC_LABELS:
+        for metric in metric_names:
             interval = stats.Interval(values[metric], values[f"{metric}_low"], values[f"{metric}_high"])
             cells.append(interval.format())
-        cells.append(f"{values['seeds_reaching']}/{values['seeds']}")
+        if reaching:
+            cells.append(f"{values['seeds_reaching']}/{values['seeds']}")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -238,7 +256,8 @@ def plot_study(results: StudyResults, path: Path) -> Path:
             episodes = np.arange(1, len(mean) + 1)
             (line,) = axis.plot(episodes, mean, label=f"{variant} ({returns.shape[0]} seeds)", linewidth=1.2)
             axis.fill_between(episodes, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
-        axis.axhline(study.threshold, color="grey", linestyle=":", linewidth=1)
+        if has_threshold(study):
+            axis.axhline(study.threshold, color="grey", linestyle=":", linewidth=1)
         axis.set_xlabel("Episode")
         axis.set_title(reading if len(readings) > 1 else study.env_id, fontsize=10)
         if axis.lines[:-1]:
@@ -322,9 +341,7 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         f"- {study.algo} on {study.env_id}, {len(study.seeds)} seeds per variant, {study.budget.describe()} per run "
         f"({results.n_runs} runs found, {len(results.missing)} missing; {results.learn_seconds / 3600:.2f} CPU hours for "
         f"the {len(results.run_seconds)} distinct ones{_trained_how(results)}).",
-        f"- Threshold: {study.threshold:g}, reached when the mean of {study.threshold_window} consecutive training "
-        "episodes reaches it (episodes to threshold: the last episode of the first such window; seeds that never "
-        f"reach it count as {censored_at}, a lower bound).",
+        _threshold_note(study, censored_at),
         f"- Intervals: {_intervals(_fewest_seeds(results))}; verdicts by the rule of [STUDIES.md](STUDIES.md).",
         *_random_level_notes(results),
         *_short_budget_notes(study),
@@ -586,13 +603,27 @@ def _short_run_notes(study: StudySpec, fewest: int, whose: str) -> list[str]:
             f"- **{fewest} episodes** {whose}: the mean over the last {stats.LAST_EPISODES} episodes of a seed with at "
             "most that many is the mean over all of them."
         )
-    if 0 < fewest < study.threshold_window:
+    if 0 < fewest < study.threshold_window and has_threshold(study):
         notes.append(
             f"- **{fewest} episodes**, fewer than the threshold's window of {study.threshold_window}, {whose}: a seed "
             "with fewer episodes than the window cannot reach the threshold, and its episodes to threshold is its "
             "episode count (censored)."
         )
     return notes
+
+
+def _threshold_note(study: StudySpec, censored_at: str) -> str:
+    """:return: the study page's line on its threshold (``censored_at``: what a seed that never reaches it counts as)"""
+    if not has_threshold(study):
+        return (
+            "- No threshold: no claim reads one, and episodes to threshold is not measured (give `threshold:`, the "
+            "return that counts as solved, to have it)."
+        )
+    return (
+        f"- Threshold: {study.threshold:g}, reached when the mean of {study.threshold_window} consecutive training "
+        "episodes reaches it (episodes to threshold: the last episode of the first such window; seeds that never "
+        f"reach it count as {censored_at}, a lower bound)."
+    )
 
 
 def _step_budget_notes(results: StudyResults) -> list[str]:

@@ -29,6 +29,7 @@ The format (the documentation's page "Study files" has every field)::
       What the source does not state, and the reading chosen.
 """
 
+import contextlib
 import dataclasses
 import difflib
 import math
@@ -53,6 +54,7 @@ from sb3_classic.harness.common import (
     unknown_setting,
 )
 from sb3_classic.harness.lockstep import plan_lockstep
+from sb3_classic.studies import untrained
 from sb3_classic.zoo import YAML_NAMES, yaml_float_string
 
 METRICS = ("mean_return", "last_100_return", "episodes_to_threshold")
@@ -168,7 +170,8 @@ class StudySpec:
     :param readings: name → overrides of the settings the source leaves unstated, applied on top of every variant
         that has them (``STATED`` first, with none)
     :param claims: the claims under test
-    :param threshold: the return that counts as solved (``episodes_to_threshold``)
+    :param threshold: the return that counts as solved (``episodes_to_threshold``); NaN where the study has none (no
+        claim reads it)
     :param threshold_window: episodes of the moving average that must reach ``threshold``
     :param smooth: episodes of the moving average drawn in the figure (1: none)
     :param notes: what the source leaves unstated, and the reading chosen
@@ -489,15 +492,7 @@ def load_study(path: Path | str) -> StudySpec:
             )
     _check_readings(check, hyperparams, variants, readings)
 
-    # The study's own, else the harness's (CartPole-v1, Acrobot-v1), else Gymnasium's reward_threshold of the env
-    default_threshold = THRESHOLDS.get(env_id, registration.reward_threshold if registration is not None else None)
-    threshold = data.get("threshold", default_threshold)
-    if not _is_number(threshold):
-        check.fail(
-            "threshold",
-            f"{threshold!r}: give the return that counts as solved on {env_id}, a finite number, e.g. threshold: 475",
-        )
-        threshold = math.nan
+    threshold = _threshold(check, data, env_id, registration, hyperparams.get("env_kwargs"))
     claims = _claims(check, data, variants, float(threshold))
     if budget is not None and budget.steps is not None:
         for index, claim in enumerate(claims):
@@ -606,6 +601,70 @@ def _env_and_algo(check: _Checker, data: Mapping[str, Any]) -> tuple[str, Any, s
         check.fail("algo", f"{algo!r} is not an algorithm of rl-zoo3: choose one of {', '.join(sorted(rl_zoo3.ALGOS))}")
         check.raise_if_any()
     return env_id, found, algo
+
+
+def _threshold(check: _Checker, data: Mapping[str, Any], env_id: str, registration: Any, env_kwargs: Any) -> float:
+    """
+    :return: the study's threshold: its own, else the harness's (CartPole-v1, Acrobot-v1), else Gymnasium's
+        ``reward_threshold`` of the env; NaN where none is given and no claim reads it (a study of one's own env that
+        claims on returns), or where it is wrong (said)
+    """
+    default = THRESHOLDS.get(env_id, registration.reward_threshold if registration is not None else None)
+    threshold = data.get("threshold", default)
+    uses = _threshold_uses(data)
+    if threshold is None and not uses:
+        return math.nan
+    if not _is_number(threshold):
+        check.fail("threshold", _threshold_problem(env_id, threshold, uses, registration, env_kwargs))
+        return math.nan
+    return float(threshold)
+
+
+def _threshold_uses(data: Mapping[str, Any]) -> list[str]:
+    """:return: the fields of a study file that read its threshold: a claim on episodes to threshold, or a level claim
+    (``reaches``, ``below``) on a return without its own ``value``"""
+    raw = [data["claim"]] if "claim" in data else data.get("claims")
+    uses = []
+    for index, item in enumerate(raw if isinstance(raw, list | tuple) else []):
+        where = "claim" if "claim" in data else f"claims[{index}]"
+        if not isinstance(item, Mapping):
+            continue
+        if item.get("metric") == "episodes_to_threshold":
+            uses.append(f"{where}.metric episodes_to_threshold")
+        elif item.get("kind") in ("reaches", "below") and "value" not in item:
+            uses.append(f"{where}, a {item.get('kind')!r} claim without value,")
+    return uses
+
+
+def _threshold_problem(env_id: str, threshold: Any, uses: Sequence[str], registration: Any, env_kwargs: Any) -> str:
+    """
+    :param env_id: the study's env
+    :param threshold: the study's threshold (None: none given, and the env has none)
+    :param uses: what reads it (``_threshold_uses``)
+    :param registration: the env's Gymnasium spec (None if unknown)
+    :param env_kwargs: the study's ``env_kwargs``
+    :return: what the threshold is for and a level to start from: the env's default where it has one, else a
+        uniformly random policy's mean return on it (measured here, on this error only), which a threshold should exceed
+    """
+    given = "missing" if threshold is None else repr(threshold)
+    why = "no claim reads it: it may be left out"
+    if uses:
+        why = f"{' and '.join(uses)} {'needs' if len(uses) == 1 else 'need'} it"
+    problem = f"{given}: give the return that counts as solved on {env_id}, a finite number ({why})"
+    default = THRESHOLDS.get(env_id, registration.reward_threshold if registration is not None else None)
+    if _is_number(default):
+        return f"{problem}, e.g. threshold: {default:g} (the env's)"
+    problem += "; the env registers no reward_threshold: a level that a policy's training returns reach once it has learned"
+    returns = None
+    if registration is not None:
+        with contextlib.suppress(Exception):  # (the env's own error comes with the runs)
+            returns = untrained.random_returns(env_id, env_kwargs if isinstance(env_kwargs, Mapping) else None)
+    if returns is None or not len(returns):
+        return problem
+    return (
+        f"{problem}, above a uniformly random policy's mean return on it, {returns.mean():.4g} ({len(returns)} episodes, "
+        f"from {returns.min():.4g} to {returns.max():.4g})"
+    )
 
 
 def _is_int(value: Any) -> TypeGuard[int]:
@@ -855,7 +914,8 @@ def _claim(check: _Checker, where: str, item: Mapping[str, Any], variants: Mappi
     if kind == "similar" and (not _is_number(margin) or margin <= 0):
         check.fail(f"{where}.margin", "a 'similar' claim needs the largest difference counted as similar, e.g. margin: 25")
     value = item.get("value", threshold if kind in ("reaches", "below") and metric != "episodes_to_threshold" else None)
-    if kind in ("reaches", "below") and not _is_number(value):
+    # (a level taken from a missing threshold: the threshold's own message says it)
+    if kind in ("reaches", "below") and not _is_number(value) and ("value" in item or math.isfinite(threshold)):
         check.fail(f"{where}.value", f"{value!r}: the level to reach (or stay below), a finite number, e.g. value: 475")
     return Claim(
         text=str(item.get("text", "")).strip(),
