@@ -86,9 +86,10 @@ def sarsa_gradient_step(env_id: str, optimizer_kwargs: dict[str, Any]) -> Callab
     rng = np.random.default_rng(0)
     actions = rng.integers(int(model.action_space.n), size=BATCH_SIZE)
     targets = rng.standard_normal(BATCH_SIZE).astype(np.float32)
+    episode_steps = np.arange(BATCH_SIZE)
 
     def step() -> None:
-        model._gradient_step(observations, actions, targets)
+        model._gradient_step(observations, actions, targets, episode_steps)
 
     return step
 

@@ -26,7 +26,7 @@ What ``register()`` changes in rl-zoo3, and nothing else:
   given masks (``enjoy`` chooses legal actions): see ``_patch_enjoy``;
 - the names a YAML's ``policy_kwargs`` string may use (the zoo evaluates it in ``rl_zoo3.exp_manager``'s namespace,
   which has ``th`` and ``nn``), and a ``-params`` value (evaluated in ``rl_zoo3.utils``'s), gain ``TileCoding``, the
-  book's features (``features_extractor_class=TileCoding``).
+  book's features (``features_extractor_class=TileCoding``), and ``ObGD``, the streaming optimizer (``optimizer_class=ObGD``).
 """
 
 import contextlib
@@ -48,6 +48,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from torch import nn
 
 from sb3_classic.common.masking import get_action_masks, is_masking_supported
+from sb3_classic.common.obgd import ObGD
 from sb3_classic.common.threads import threads_chosen
 from sb3_classic.common.tile_coding import TileCoding
 from sb3_classic.common.torch_layers import WEIGHT_INITS
@@ -65,7 +66,7 @@ SUPPORTED_RL_ZOO3 = ">=2.9,<3"
 ALGORITHMS: dict[str, type[REINFORCE] | type[NStepSARSA]] = {"reinforce": REINFORCE, "nstep_sarsa": NStepSARSA}
 
 #: Names a YAML's ``policy_kwargs`` string may use besides the zoo's own (``th``, ``nn``, ...)
-YAML_NAMES: dict[str, Any] = {"TileCoding": TileCoding}
+YAML_NAMES: dict[str, Any] = {"TileCoding": TileCoding, "ObGD": ObGD}
 
 # Where the YAMLs are: inside the installed package (the wheel's force-include), else the source tree's hyperparams/
 # (an editable install, or a checkout on sys.path)
@@ -538,7 +539,7 @@ def _loading_with_masks(original_load: Callable[..., Any]) -> classmethod:
 def register() -> None:
     """
     Register ``reinforce`` and ``nstep_sarsa`` with rl-zoo3: algorithms, Optuna samplers and converters, default
-    YAMLs, and the names their YAMLs' ``policy_kwargs`` may use (``TileCoding``). Idempotent; it checks the installed
+    YAMLs, and the names their YAMLs' ``policy_kwargs`` may use (``TileCoding``, ``ObGD``). Idempotent; it checks the installed
     rl-zoo3 first and changes nothing if that lacks any of them.
 
     :raises ZooCompatibilityError: (an ``ImportError``) if the installed rl-zoo3 lacks what this patches; the

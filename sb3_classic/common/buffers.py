@@ -51,6 +51,13 @@ class TrainingBatch(NamedTuple):
     #: the masks of S_t, shape (B, mask_size), boolean, if the buffer stores masks
     action_masks: np.ndarray | None = None
 
+    def step_arguments(self, chunk: slice) -> tuple[Observations, np.ndarray, np.ndarray, np.ndarray]:
+        """
+        :param chunk: the transitions of one gradient step
+        :return: their S_t, A_t, targets and episode steps t (where t = 0, S_t starts an episode)
+        """
+        return select(self.observations, chunk), self.actions[chunk], self.targets[chunk], self.episode_steps[chunk]
+
 
 def select(observations: Observations, index: Any) -> Observations:
     """Index an observation array, or each array of a ``Dict`` observation."""

@@ -299,14 +299,14 @@ def sarsa_targets(
         time-limit truncation; shape (B,), float32
     :param rewards: R_{t+1}, shape (n_steps_stored, n_envs) (λ < 1 only)
     :param step_values: q̂(S_t, A_t) (or the expectation) of every stored step t, shape (n_steps_stored, n_envs):
-        what G^λ bootstraps from inside a window; None for λ = 1
+        what G^λ bootstraps from inside a window; None for λ = 1, or for windows of one reward (n = 1), whose λ-return
+        is the one-step return G_{t:t+1} whatever λ (eq. 12.9)
     :param gamma: discount factor γ
     :param td_lambda: λ in [0, 1]
     :return: the targets, shape (B,), float32
     """
-    if td_lambda == 1.0:
+    if td_lambda == 1.0 or step_values is None:
         return nstep_returns(windows.reward_sums, windows.bootstrap_discounts, bootstrap)
-    assert step_values is not None, "λ-returns bootstrap from the value after every step of a window"
     # The value after each step k of a window: q̂(S_{k+1}, A_{k+1}), and its bootstrap after the window's last
     next_values = np.zeros_like(step_values)
     next_values[:-1] = step_values[1:]

@@ -1,5 +1,5 @@
 """
-Network options shared by the policies: activations with arguments, He (Kaiming) initialisation, and the
+Network options shared by the policies: activations with arguments, He (Kaiming) and sparse initialisation, and the
 optimizer's implementation.
 """
 
@@ -18,6 +18,11 @@ from sb3_classic.common.utils import check_choice
 
 #: ``weight_init`` choices: SB3's orthogonal scheme (A2C/PPO), He et al. 2015, or PyTorch's own defaults
 WEIGHT_INITS = ("orthogonal", "kaiming", "default")
+#: ``weight_init`` choices of a policy that also offers the streaming recipe's sparse initialisation (``sparse_init``)
+WEIGHT_INITS_WITH_SPARSE = (*WEIGHT_INITS, "sparse")
+
+#: The fraction of each unit's incoming weights that ``sparse_init`` sets to 0 (Elsayed, Vasan & Mahmood 2024's)
+SPARSITY = 0.9
 
 # The nonlinearity argument of nn.init.kaiming_normal_ for the activations it knows
 Nonlinearity = Literal["relu", "leaky_relu", "tanh", "sigmoid", "selu"]
@@ -122,8 +127,43 @@ def kaiming_init(
                     nn.init.zeros_(layer.bias)
 
 
-def check_weight_init(weight_init: str | float) -> None:
-    """:param weight_init: one of ``WEIGHT_INITS``, or a finite number (every weight starts at that constant)"""
+def sparse_init(modules: Iterable[nn.Module], sparsity: float = SPARSITY) -> None:
+    r"""
+    Sparse initialisation (Elsayed, Vasan & Mahmood 2024, "Streaming Deep Reinforcement Learning Finally Works", arXiv
+    2410.14606): every weight of the linear layers in ``modules`` drawn LeCun-uniform,
+    :math:`U(-\sqrt{3 / n}, \sqrt{3 / n})` for a layer of fan-in :math:`n` (variance :math:`1/n`, LeCun et al. 1998),
+    then :math:`\lfloor s n \rfloor` of each unit's :math:`n` incoming weights, chosen at random, set to 0; biases 0.
+    With :math:`s` = 0.9 a unit of a 128-unit layer starts with 13 inputs, and one over CartPole-v1's 4 observations
+    with 1. Draws from torch's global generator (seeded with the model).
+
+    :param modules: the networks to initialise (each ``nn.Linear`` inside them, output layers included)
+    :param sparsity: :math:`s`, the fraction of each unit's incoming weights set to 0, in [0, 1)
+    :raises ValueError: for a ``sparsity`` outside [0, 1)
+    """
+    if not 0.0 <= sparsity < 1.0:
+        raise ValueError(
+            f"sparsity={sparsity!r} must be in [0, 1): the fraction of each unit's inputs set to 0 (0.9 is the paper's)"
+        )
+    for module in modules:
+        for layer in module.modules():
+            if isinstance(layer, nn.Linear):
+                fan_in = layer.in_features
+                bound = math.sqrt(3.0 / fan_in)
+                with th.no_grad():
+                    layer.weight.uniform_(-bound, bound)
+                    # ⌊s n⌋ of each row (a unit's incoming weights) at random positions
+                    n_zeros = math.floor(sparsity * fan_in)
+                    zeros = th.rand(layer.weight.shape, device=layer.weight.device).argsort(dim=1)[:, :n_zeros]
+                    layer.weight.scatter_(1, zeros, 0.0)
+                if layer.bias is not None:
+                    nn.init.zeros_(layer.bias)
+
+
+def check_weight_init(weight_init: str | float, choices: tuple[str, ...] = WEIGHT_INITS) -> None:
+    """
+    :param weight_init: one of ``choices``, or a finite number (every weight starts at that constant)
+    :param choices: the schemes the policy offers (``WEIGHT_INITS``, or ``WEIGHT_INITS_WITH_SPARSE``)
+    """
     if isinstance(weight_init, numbers.Real) and not isinstance(weight_init, bool):
         if not math.isfinite(weight_init):
             raise ValueError(f"weight_init={weight_init!r} must be finite (0.0 is the book's start for linear methods)")
@@ -131,7 +171,7 @@ def check_weight_init(weight_init: str | float) -> None:
     check_choice(
         "weight_init",
         weight_init,
-        WEIGHT_INITS,
+        choices,
         hint="'kaiming' is He initialisation; a number (e.g. 0.0, the book's start for linear methods) sets all weights to it",
     )
 

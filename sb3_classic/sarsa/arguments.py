@@ -6,6 +6,7 @@ from functools import partial
 from typing import Any
 
 from sb3_classic.common.arguments import ArgumentRule, optional
+from sb3_classic.common.obgd import ObGD
 from sb3_classic.common.utils import check_bool, check_choice, check_positive_int, check_range
 from sb3_classic.sarsa.policies import LinearQPolicy
 
@@ -130,6 +131,52 @@ def check_linear_policy_update(policy_class: type, loss_function: str, max_grad_
             )
 
 
+def check_trace_settings(
+    policy_kwargs: dict[str, Any] | None,
+    update_mode: str,
+    n_steps: int,
+    gradient_steps: int,
+    n_envs: int | None,
+    loss_function: str,
+    max_grad_norm: float | None,
+) -> None:
+    """
+    ``ObGD`` makes SARSA(λ)'s update along eligibility traces (S&B §12.7): one transition at a time, by its one-step TD
+    error, in one stream of time steps.
+
+    :param policy_kwargs: the policy's arguments (``optimizer_class``)
+    :param update_mode: ``update_mode``
+    :param n_steps: ``n_steps``
+    :param gradient_steps: ``gradient_steps``
+    :param n_envs: the number of envs (None: no env yet)
+    :param loss_function: ``loss_function``
+    :param max_grad_norm: ``max_grad_norm`` (``math.inf`` or None: no clipping)
+    :raises ValueError: for a setting the update along traces cannot make, naming it and the fix
+    """
+    optimizer_class = (policy_kwargs or {}).get("optimizer_class")
+    if not (isinstance(optimizer_class, type) and issubclass(optimizer_class, ObGD)):
+        return
+    why = "ObGD makes SARSA(λ)'s update along eligibility traces (S&B §12.7), one transition at a time"
+    for name, value, needed, fix in (
+        ("update_mode", update_mode, "per_step", "pass update_mode='per_step' (each transition's own update, in time order)"),
+        ("n_steps", n_steps, 1, "pass n_steps=1: δ is the one-step TD error, and td_lambda is the traces' λ"),
+        ("gradient_steps", gradient_steps, 1, "pass gradient_steps=1: a second pass would decay the traces twice"),
+        ("loss_function", loss_function, "mse", "drop loss_function: ObGD's bound on δ̄ = max(|δ|, 1) is its own clipping"),
+    ):
+        if value != needed:
+            raise ValueError(f"{name}={value!r} with optimizer_class=ObGD: {why}; {fix}, or use another optimizer")
+    if max_grad_norm is not None and math.isfinite(max_grad_norm):
+        raise ValueError(
+            f"max_grad_norm={max_grad_norm!r} with optimizer_class=ObGD: {why}, and bounds its own step (M = ακδ̄‖e‖₁); "
+            "drop max_grad_norm, or use another optimizer"
+        )
+    if n_envs is not None and n_envs != 1:
+        raise ValueError(
+            f"{n_envs} envs with optimizer_class=ObGD: {why}, with one trace over one stream of time steps; train on one "
+            "env (rl-zoo3: n_envs: 1), or use another optimizer"
+        )
+
+
 def _probability(low_open: bool = False, hint: str = "") -> Callable[[str, Any], None]:
     return partial(check_range, low=0.0, high=1.0, low_open=low_open, hint=hint)
 
@@ -186,4 +233,8 @@ ARGUMENT_RULES: tuple[ArgumentRule, ...] = (
         ),
     ),
     (("policy_class", "loss_function", "max_grad_norm"), check_linear_policy_update),
+    (
+        ("policy_kwargs", "update_mode", "n_steps", "gradient_steps", "n_envs", "loss_function", "max_grad_norm"),
+        check_trace_settings,
+    ),
 )

@@ -103,7 +103,7 @@ class _StackedQ(Trainer[NStepSARSA]):
 
         :return: each given member's q̂(S_t, A_t) before the step, shape (n,), and its loss
         """
-        observations, actions, targets = zip(*chunks, strict=True)
+        observations, actions, targets, _ = zip(*chunks, strict=True)
         device = self.device
         x = th.as_tensor(side_by_side(observations, lengths, (self.features,), np.float32), device=device)
         index = th.as_tensor(side_by_side(actions, lengths, (1,), np.int64), device=device)

@@ -11,8 +11,9 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 from stable_baselines3.common.utils import LinearSchedule, obs_as_tensor
 
 from sb3_classic.common.arguments import check_arguments
-from sb3_classic.common.buffers import TrainingBatch, select
+from sb3_classic.common.buffers import Observations, TrainingBatch, select
 from sb3_classic.common.masking import uniform_legal_actions
+from sb3_classic.common.obgd import ObGD, td_step
 from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm, Update, run_update
 from sb3_classic.common.returns import (
     CompletedWindows,
@@ -106,10 +107,10 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
       ``policy="LinearPolicy"`` (``LinearQPolicy``) is the book's linear q̂ with its own SGD update.
 
     Options that are not in §10.2's algorithm (all off by default): a slowly-moving bootstrap network
-    (``target_update_interval``, ``tau``: SB3's DQN names), truncated λ-returns :math:`G^\lambda_{t:t+n}`
-    (``td_lambda``, §12.3, as CleanRL's PQN), LayerNorm (``policy_kwargs=dict(layer_norm=True)``), and a greedy policy
-    from a Polyak average of q̂'s weights (``averaging_tau``), which keeps a q̂ that passes through a bad state for an
-    update or two from showing it in evaluations.
+    (``target_update_interval``, ``tau``: SB3's DQN names), truncated λ-returns (``td_lambda``, §12.3, as CleanRL's PQN)
+    or SARSA(λ) with eligibility traces under the ``ObGD`` optimizer (§12.7, the streaming recipe), LayerNorm
+    (``policy_kwargs=dict(layer_norm=True)``), and a greedy policy from a Polyak average of q̂'s weights
+    (``averaging_tau``), which keeps a q̂ that passes through a bad state for an update or two out of evaluations.
 
     The greedy action breaks ties at random (the book's ``argmax``), except in ``predict(deterministic=True)``, which
     takes the first so that it stays reproducible. At a time-limit truncation the target bootstraps from the final
@@ -143,11 +144,11 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     :param gamma: discount factor γ
     :param expected_sarsa: bootstrap from the ε-greedy expectation of q̂ instead of q̂ of the action taken
     :param td_lambda: λ of the truncated λ-return :math:`G^\lambda_{t:t+n}` (S&B §12.3, eq. 12.9), the target of each
-        transition: the k-step returns :math:`G_{t:t+k}` of its n-step window (k = 1, …, n) averaged with weights
-        :math:`(1 - \lambda)\lambda^{k-1}`, and :math:`\lambda^{n-1}` for the n-step one. 1 (the default) is the n-step
-        return :math:`G_{t:t+n}` of §10.2, 0 the one-step return. Not in §10.2's algorithm (with λ < 1 it is the
-        forward view of n-step-truncated SARSA(λ), as CleanRL's PQN uses λ-returns); each update then computes q̂ of
-        every stored step once more
+        transition: the k-step returns :math:`G_{t:t+k}` of its window (k = 1, …, n) weighted :math:`(1 - \lambda)
+        \lambda^{k-1}`, :math:`\lambda^{n-1}` the n-step one; 1 (the default) is §10.2's :math:`G_{t:t+n}`, 0 the
+        one-step return (the forward view of n-step-truncated SARSA(λ), as CleanRL's PQN; each update computes q̂ of every
+        stored step once more). With ``policy_kwargs=dict(optimizer_class=ObGD)`` (``update_mode="per_step"``,
+        ``n_steps=1``), the backward view: the decay of the eligibility traces, e ← γλe + ∇q̂ (SARSA(λ), §12.7)
     :param exploration_schedule: ``"exponential"``: :math:`\varepsilon \leftarrow \max(\varepsilon_\text{final},
         \varepsilon \rho)` with ρ = ``exploration_decay_rate``, at the end of every episode (the seed report's);
         ``"linear"``: from initial to final over ``exploration_fraction`` of
@@ -452,7 +453,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         if len(windows.rows) == 0:
             return None
         # λ-returns need the value after every step of each window: of every stored step, from one forward pass
-        step_values = self._stored_values() if self.td_lambda < 1.0 else None
+        step_values = self._stored_values() if self.td_lambda < 1.0 and self.n_steps > 1 else None
         bootstrap = self._window_bootstrap_values(windows, step_values)
         targets = sarsa_targets(windows, bootstrap, buffer.rewards[:pos], step_values, self.gamma, self.td_lambda)
         rows, envs = windows.rows, windows.envs
@@ -569,7 +570,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
     def _update(self) -> Update:
         """
         The update of ``train``, its gradient steps made by the caller: it yields the transitions of each gradient step,
-        (S_t, A_t, G_{t:t+n}) (S&B eq. 10.4), and is sent back what the step gave (``_gradient_step``'s q̂(S_t, A_t)
+        (S_t, A_t, G_{t:t+n}, t) (S&B eq. 10.4), and is sent back what the step gave (``_gradient_step``'s q̂(S_t, A_t)
         before the step and loss). ``train`` makes them with ``_gradient_step``; a population with its stacked step.
         """
         self._update_learning_rates([(self.policy.optimizer, self.lr_schedule, "train/learning_rate")])
@@ -589,7 +590,7 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         losses: list[float] = []  # every gradient step's, for the log's mean (SB3's DQN logs the mean)
         for gradient_step in range(self.gradient_steps):
             for chunk in chunks:
-                q_predicted, loss = yield select(batch.observations, chunk), batch.actions[chunk], batch.targets[chunk]
+                q_predicted, loss = yield batch.step_arguments(chunk)
                 losses.append(loss)
                 if gradient_step == 0:
                     q_first.append(q_predicted)
@@ -606,15 +607,16 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         self.logger.record("train/n_transitions", len(batch.targets))
 
     def _gradient_step(
-        self, observations: np.ndarray | dict[str, np.ndarray], actions: np.ndarray, targets: np.ndarray
+        self, observations: Observations, actions: np.ndarray, targets: np.ndarray, episode_steps: np.ndarray
     ) -> tuple[np.ndarray, float]:
         """
-        One gradient step of q̂ on the mean loss of the given transitions: ``LinearQPolicy``'s own SGD step, or autograd
-        and the policy's optimizer.
+        One gradient step of q̂ on the mean loss of the given transitions: ``LinearQPolicy``'s own SGD step, autograd and
+        the policy's optimizer, or with ``ObGD`` one transition's step of SARSA(λ) along its traces (``td_step``).
 
         :param observations: S_t, a batch of B
         :param actions: A_t as indices, shape (B,)
         :param targets: G_{t:t+n}, shape (B,), float32
+        :param episode_steps: t, the step of each S_t within its episode, shape (B,)
         :return: q̂(S_t, A_t) before the step, shape (B,), float32, and the loss
         """
         if isinstance(self.policy, LinearQPolicy):
@@ -622,6 +624,8 @@ class NStepSARSA(ClassicOnPolicyAlgorithm):
         index = th.as_tensor(actions, device=self.device).reshape(-1, 1)
         q_predicted = self.policy.q_net(obs_as_tensor(observations, self.device)).gather(1, index).flatten()
         target = th.as_tensor(targets, device=self.device)
+        if isinstance(self.policy.optimizer, ObGD):  # SARSA(λ): td_lambda's backward view, with traces (S&B §12.7)
+            return td_step(self.policy.optimizer, q_predicted, target, self.gamma * self.td_lambda, episode_steps[0] == 0)
         # (a model alone is a member axis of one)
         loss = sarsa_losses(q_predicted.unsqueeze(0), target.unsqueeze(0), self.loss_function == "huber").squeeze(0)
         self.policy.optimizer.zero_grad()

@@ -1,6 +1,7 @@
 """Q-network policies of n-step SARSA: q̂(s, ·, w), one output per action."""
 
 import copy
+from functools import partial
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -25,6 +26,7 @@ from sb3_classic.common.policies import EnvActionsMixin, mode_dependent
 from sb3_classic.common.returns import greedy_random_ties
 from sb3_classic.common.tile_coding import TileCoding
 from sb3_classic.common.torch_layers import (
+    WEIGHT_INITS_WITH_SPARSE,
     check_constant_init_is_linear,
     check_net_arch,
     check_weight_init,
@@ -33,6 +35,7 @@ from sb3_classic.common.torch_layers import (
     kaiming_init,
     make_activation,
     optimizer_kwargs_with_defaults,
+    sparse_init,
 )
 from sb3_classic.common.utils import check_bool
 
@@ -61,14 +64,18 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
     :param activation_kwargs: arguments of ``activation_fn``, e.g. ``dict(negative_slope=0.1)`` for ``nn.LeakyReLU``
     :param weight_init: ``"kaiming"`` (He initialisation of the hidden layers, the seed report's choice; the output
         layer keeps PyTorch's default), ``"orthogonal"`` (SB3's A2C/PPO scheme: gain √2 hidden, 1 output),
-        ``"default"`` (PyTorch's default everywhere, as SB3's DQN), or a number: every weight starts at that constant
-        and every bias at 0 (the book's linear methods start at 0)
+        ``"default"`` (PyTorch's default everywhere, as SB3's DQN), ``"sparse"`` (every layer's, the output's too: 90% of
+        each unit's incoming weights 0, the rest LeCun-uniform, biases 0; ``sparse_init``, the streaming recipe of
+        Elsayed, Vasan & Mahmood 2024), or a number: every weight starts at that constant and every bias at 0 (the
+        book's linear methods start at 0)
     :param with_bias: whether the linear layers have a bias (SB3's ``create_mlp`` name). The book's linear
         :math:`\hat q(s, a, \mathbf w) = \mathbf w^\top \mathbf x(s, a)` with its own SGD update is ``LinearQPolicy``
         (``"LinearPolicy"``)
     :param layer_norm: LayerNorm after every hidden linear layer, before its activation (as CleanRL's PQN, which
         learns with on-policy Q-targets from the online network: it keeps the features' scale, and so the targets',
         from drifting)
+    :param layer_norm_kwargs: arguments of ``nn.LayerNorm`` (``layer_norm=True`` only), e.g.
+        ``dict(elementwise_affine=False)``: LayerNorm without learnable gain and bias, the streaming recipe's
     :param target_network: also build ``q_net_target``, a copy of q̂ that NStepSARSA bootstraps from and moves towards
         q̂ every ``target_update_interval`` steps (SB3's DQN); the book bootstraps from q̂ itself
     :param averaged_network: also build ``q_net_average``, a Polyak average of q̂'s weights that ``NStepSARSA`` updates
@@ -96,6 +103,7 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         weight_init: str | float = "kaiming",
         with_bias: bool = True,
         layer_norm: bool = False,
+        layer_norm_kwargs: dict[str, Any] | None = None,
         target_network: bool = False,
         averaged_network: bool = False,
         features_extractor_class: type[BaseFeaturesExtractor] = FlattenExtractor,
@@ -104,7 +112,7 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
         optimizer_kwargs: dict[str, Any] | None = None,
     ) -> None:
-        check_weight_init(weight_init)
+        check_weight_init(weight_init, WEIGHT_INITS_WITH_SPARSE)
         super().__init__(
             observation_space,
             action_space,
@@ -125,12 +133,18 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
                 f"layer_norm=True normalises q̂'s hidden layers, and net_arch={list(net_arch)} has none (q̂ is linear in "
                 "the features): give hidden layers (e.g. net_arch=[64, 64]) or drop layer_norm"
             )
+        if layer_norm_kwargs is not None and not layer_norm:
+            raise ValueError(
+                f"layer_norm_kwargs={layer_norm_kwargs!r} are the arguments of q̂'s LayerNorm, and layer_norm is False (no "
+                "LayerNorm): pass layer_norm=True as well, or drop layer_norm_kwargs"
+            )
         self.net_arch = net_arch
         self.activation_fn = activation_fn
         self.activation_kwargs = activation_kwargs
         self.weight_init = weight_init
         self.with_bias = with_bias
         self.layer_norm = layer_norm
+        self.layer_norm_kwargs = layer_norm_kwargs
         self.target_network = target_network
         self.averaged_network = averaged_network
 
@@ -152,6 +166,8 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             constant_init([*own, self.q_net.q_net], weight_init)
         elif weight_init == "kaiming":
             kaiming_init(hidden, activation_fn, activation_kwargs)
+        elif weight_init == "sparse":
+            sparse_init([*own, self.q_net.q_net])
         elif weight_init == "orthogonal":
             for module in hidden:
                 module.apply(lambda layer: self.init_weights(layer, gain=np.sqrt(2)))
@@ -239,13 +255,14 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
         )
         if self.layer_norm or not self.with_bias:
             # SB3's QNetwork has neither option: the same MLP from SB3's create_mlp, with them
+            norm = partial(nn.LayerNorm, **(self.layer_norm_kwargs or {}))
             mlp = create_mlp(
                 features_extractor.features_dim,
                 int(self.action_space.n),
                 self.net_arch,
                 activation,
                 with_bias=self.with_bias,
-                post_linear_modules=[nn.LayerNorm] if self.layer_norm else None,
+                post_linear_modules=[norm] if self.layer_norm else None,  # type: ignore[list-item]
             )
             q_net.q_net = nn.Sequential(*mlp)
         return q_net
@@ -290,6 +307,7 @@ class SARSAPolicy(EnvActionsMixin, BasePolicy):
             weight_init=self.weight_init,
             with_bias=self.with_bias,
             layer_norm=self.layer_norm,
+            layer_norm_kwargs=self.layer_norm_kwargs,
             target_network=self.target_network,
             averaged_network=self.averaged_network,
             lr_schedule=self._dummy_schedule,  # not needed to load the policy alone

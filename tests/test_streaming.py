@@ -1,0 +1,228 @@
+"""
+The streaming recipe: ObGD's step against its formula, SARSA(λ) along its traces against a tabular transcription of the
+book's, sparse initialisation, LayerNorm without parameters, the argument checks, and save/load of the traces.
+"""
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import torch as th
+from chain_env import ShortChain
+from recorders import RecordLocal
+from stable_baselines3.common.utils import set_random_seed
+from stable_baselines3.common.vec_env import DummyVecEnv
+from torch import nn
+
+from sb3_classic import NStepSARSA
+from sb3_classic.common.obgd import ObGD, td_step
+from sb3_classic.common.torch_layers import sparse_init
+from sb3_classic.envs import RandomWalkEnv
+
+GAMMA, LAMBDA = 0.9, 0.8
+
+
+@pytest.mark.parametrize(("lr", "kappa", "bounded"), [(0.01, 2.0, False), (1.0, 2.0, True), (1.0, 0.0, False)])
+def test_obgd_step_is_its_formula(lr: float, kappa: float, bounded: bool) -> None:
+    weight = nn.Parameter(th.tensor([0.5, -1.0, 2.0]))
+    bias = nn.Parameter(th.tensor(0.25))
+    optimizer = ObGD([weight, bias], lr=lr, kappa=kappa)
+    w, b = weight.detach().double().numpy().copy(), float(bias.detach())
+    e_w, e_b = np.zeros(3), 0.0
+    for grad_w, grad_b, td_error, decay in (
+        ([0.2, -0.1, 0.3], 0.5, 0.7, 0.0),
+        ([-0.4, 0.6, 0.1], -0.2, -1.5, GAMMA * LAMBDA),
+    ):
+        weight.grad, bias.grad = th.tensor(grad_w), th.tensor(grad_b)
+        optimizer.step(td_error=td_error, trace_decay=decay)
+        # e ← γλe + ∇; δ̄ = max(|δ|, 1); M = ακδ̄‖e‖₁; w ← w + (α / max(M, 1)) δ e
+        e_w, e_b = decay * e_w + np.array(grad_w), decay * e_b + grad_b
+        bound = lr * kappa * max(abs(td_error), 1.0) * (np.abs(e_w).sum() + abs(e_b))
+        assert (bound > 1.0) == bounded
+        step = lr / bound if bound > 1.0 else lr
+        w, b = w + step * td_error * e_w, b + step * td_error * e_b
+        np.testing.assert_allclose(weight.detach().numpy(), w, rtol=1e-6)
+        assert float(bias.detach()) == pytest.approx(b, rel=1e-6)
+        np.testing.assert_allclose(optimizer.state[weight]["eligibility_trace"].numpy(), e_w, rtol=1e-6)
+
+
+def test_obgd_refuses_a_loss_step_and_bad_arguments() -> None:
+    weight = nn.Parameter(th.ones(2))
+    with pytest.raises(ValueError, match=r"kappa=-1.0\): must be a finite number >= 0"):
+        ObGD([weight], kappa=-1.0)
+    with pytest.raises(ValueError, match="lr=nan"):
+        ObGD([weight], lr=math.nan)
+    optimizer = ObGD([weight])
+    weight.grad = th.ones(2)
+    with pytest.raises(ValueError, match=r"ObGD.step\(td_error=δ"):
+        optimizer.step()
+    with pytest.raises(ValueError, match=r"trace_decay=1\.5"):
+        optimizer.step(td_error=1.0, trace_decay=1.5)
+
+
+def test_traces_restart_at_an_episode_start() -> None:
+    layer = nn.Linear(3, 1)
+    optimizer = ObGD(layer.parameters(), lr=0.1)
+    for x, restart in (([1.0, 0.0, 2.0], True), ([0.5, 1.0, 0.0], False), ([0.0, 3.0, 1.0], True)):
+        observation = th.tensor([x])
+        td_step(optimizer, layer(observation).flatten(), th.tensor([1.0]), GAMMA * LAMBDA, restart)
+    # After a restart the trace is the gradient of that step alone: x(S_0) for the weight, 1 for the bias
+    assert th.equal(optimizer.state[layer.weight]["eligibility_trace"], th.tensor([[0.0, 3.0, 1.0]]))
+    assert th.equal(optimizer.state[layer.bias]["eligibility_trace"], th.tensor([1.0]))
+    optimizer.reset_traces()
+    assert not optimizer.state[layer.weight]["eligibility_trace"].any()
+    with pytest.raises(ValueError, match="one transition at a time"):
+        td_step(optimizer, layer(th.ones(2, 3)).flatten(), th.ones(2), GAMMA * LAMBDA, False)
+
+
+def tabular_sarsa_lambda(
+    states: list[int], actions: list[int], rewards: list[float], ends: list[bool], n_states: int, n_actions: int, alpha: float
+) -> np.ndarray:
+    """
+    Sutton & Barto's box of §12.7 (Sarsa(λ) with binary features and accumulating traces) with one feature per state
+    and action, replaying a recorded trajectory: step t is (S_t, A_t, R_{t+1}), and ``ends[t]`` says that S_{t+1} is
+    terminal (the next step starts an episode).
+
+    :return: w, shape (n_actions, n_states)
+    """
+    w = np.zeros((n_actions, n_states))
+    z = np.zeros_like(w)
+    for t, (s, a, r) in enumerate(zip(states, actions, rewards, strict=True)):
+        if t == 0 or ends[t - 1]:
+            z[:] = 0.0  # (a new episode)
+        delta = r - w[a, s]
+        z[a, s] += 1.0  # accumulating traces
+        if ends[t]:
+            w += alpha * delta * z
+            continue
+        if t + 1 == len(states):
+            break  # (A_{t+1} not taken: the model has not made this update either)
+        delta += GAMMA * w[actions[t + 1], states[t + 1]]
+        w += alpha * delta * z
+        z *= GAMMA * LAMBDA
+    return w
+
+
+@pytest.mark.parametrize("make_env", [lambda: RandomWalkEnv(5), lambda: ShortChain(5)], ids=["random-walk", "chain"])
+def test_sarsa_lambda_is_the_books_tabular_sarsa_lambda(make_env: Any) -> None:
+    alpha = 0.1
+    env = DummyVecEnv([make_env])
+    model = NStepSARSA(
+        "MlpPolicy",
+        env,
+        learning_rate=alpha,
+        n_steps=1,
+        train_freq=1,
+        gradient_steps=1,
+        update_mode="per_step",
+        gamma=GAMMA,
+        td_lambda=LAMBDA,
+        exploration_initial_eps=0.3,
+        exploration_final_eps=0.3,
+        # q̂(s, a) = W[a] · onehot(s): the tabular Q; κ = 0: the book's step α, without ObGD's bound
+        policy_kwargs=dict(
+            net_arch=[], with_bias=False, weight_init=0.0, optimizer_class=ObGD, optimizer_kwargs=dict(kappa=0.0)
+        ),
+        seed=3,
+        device="cpu",
+    )
+    recorders = [RecordLocal(name) for name in ("actions", "rewards", "dones", "new_obs")]
+    model.learn(400, callback=recorders)  # type: ignore[arg-type]
+    actions, rewards, dones, new_obs = ([np.asarray(value)[0] for value in recorder.values] for recorder in recorders)
+    assert sum(dones) >= 5, "the test needs several episodes"
+    first = int(np.argmax(env.envs[0].reset()[0]))
+    # S_{t+1} is the observation after step t (after an episode's end, the next episode's first)
+    states = [first] + [int(np.argmax(obs)) for obs in new_obs[:-1]]
+    n_actions = int(model.action_space.n)
+    expected = tabular_sarsa_lambda(states, actions, rewards, dones, len(new_obs[0]), n_actions, alpha)
+    # (float32 against float64: to rounding)
+    (layer,) = (module for module in model.policy.q_net.q_net if isinstance(module, nn.Linear))
+    np.testing.assert_allclose(layer.weight.detach().numpy(), expected, rtol=1e-5, atol=1e-6)
+
+
+def test_sparse_init_zeroes_90_percent_of_each_units_inputs() -> None:
+    layers = [nn.Linear(4, 128), nn.Linear(128, 128), nn.Linear(128, 2)]
+    network = nn.Sequential(layers[0], nn.ReLU(), layers[1], nn.ReLU(), layers[2])
+    th.manual_seed(0)
+    sparse_init([network])
+    for layer in layers:
+        fan_in = layer.in_features
+        zeros = (layer.weight == 0).sum(dim=1)
+        assert th.equal(zeros, th.full_like(zeros, math.floor(0.9 * fan_in)))  # 3 of 4, 115 of 128
+        assert layer.weight.abs().max() <= math.sqrt(3 / fan_in)
+        assert not layer.bias.any()
+    # The zeros of each unit are its own draw, not one pattern for all
+    assert len({tuple(row.nonzero().flatten().tolist()) for row in layers[1].weight}) > 100
+    with pytest.raises(ValueError, match=r"sparsity=1\.0 must be in"):
+        sparse_init([network], sparsity=1.0)
+
+
+def streaming_model(env: Any, **kwargs: Any) -> NStepSARSA:
+    policy_kwargs = dict(
+        net_arch=[32, 32],
+        layer_norm=True,
+        layer_norm_kwargs=dict(elementwise_affine=False),
+        weight_init="sparse",
+        optimizer_class=ObGD,
+    )
+    settings: dict[str, Any] = dict(
+        learning_rate=1.0, n_steps=1, train_freq=1, gradient_steps=1, update_mode="per_step", td_lambda=LAMBDA
+    )
+    settings.update(kwargs)
+    return NStepSARSA("MlpPolicy", env, policy_kwargs=policy_kwargs, seed=0, device="cpu", **settings)
+
+
+def test_the_recipes_network() -> None:
+    model = streaming_model("CartPole-v1")
+    norms = [layer for layer in model.policy.q_net.q_net if isinstance(layer, nn.LayerNorm)]
+    assert len(norms) == 2
+    assert all(norm.weight is None and norm.bias is None for norm in norms)
+    assert isinstance(model.policy.optimizer, ObGD)
+    with pytest.raises(ValueError, match="pass layer_norm=True as well"):
+        NStepSARSA("MlpPolicy", "CartPole-v1", policy_kwargs=dict(layer_norm_kwargs=dict(elementwise_affine=False)))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        (dict(update_mode="batch"), "update_mode='batch' with optimizer_class=ObGD.*pass update_mode='per_step'"),
+        (dict(n_steps=3), "n_steps=3 with optimizer_class=ObGD.*pass n_steps=1"),
+        (dict(gradient_steps=2), "gradient_steps=2 with optimizer_class=ObGD"),
+        (dict(loss_function="huber"), "loss_function='huber' with optimizer_class=ObGD"),
+        (dict(max_grad_norm=10.0), "max_grad_norm=10.0 with optimizer_class=ObGD"),
+    ],
+)
+def test_settings_obgd_cannot_train_are_refused(kwargs: dict[str, Any], match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        streaming_model("CartPole-v1", **kwargs)
+
+
+def test_obgd_with_several_envs_is_refused() -> None:
+    with pytest.raises(ValueError, match=r"2 envs with optimizer_class=ObGD.*train on one env"):
+        streaming_model(DummyVecEnv([lambda: ShortChain(4)] * 2))
+
+
+def test_save_load_keeps_the_traces(tmp_path: Path) -> None:
+    def env() -> DummyVecEnv:
+        vec_env = DummyVecEnv([lambda: ShortChain(6)])
+        vec_env.seed(5)
+        return vec_env
+
+    model = streaming_model(env(), exploration_initial_eps=0.5, exploration_final_eps=0.5)
+    model.learn(300)
+    model.save(tmp_path / "model.zip")
+    loaded = NStepSARSA.load(tmp_path / "model.zip", env=env(), device="cpu")
+    traces = [model.policy.optimizer.state[p]["eligibility_trace"] for p in model.policy.q_net.parameters()]
+    loaded_traces = [loaded.policy.optimizer.state[p]["eligibility_trace"] for p in loaded.policy.q_net.parameters()]
+    assert any(trace.any() for trace in traces)
+    assert all(th.equal(a, b) for a, b in zip(traces, loaded_traces, strict=True))
+    assert loaded.policy.optimizer.param_groups[0]["kappa"] == 2.0
+    # The loaded model continues as the original does, to the bit (new episodes of envs seeded alike, the same draws)
+    model.set_env(env())
+    for continued in (model, loaded):
+        set_random_seed(7)
+        continued.learn(300)
+    for a, b in zip(model.policy.parameters(), loaded.policy.parameters(), strict=True):
+        assert th.equal(a, b)
