@@ -19,6 +19,7 @@ from rich.markup import escape
 from sb3_classic.harness.common import positive_int
 from sb3_classic.harness.pool import report_missing, run_missing_runs
 from sb3_classic.harness.runner import RUN_FILE, DamagedRunError, RunError, check_run
+from sb3_classic.studies import sequential
 from sb3_classic.studies.outputs import (
     PROGRAM,
     StudyResults,
@@ -186,21 +187,37 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
     budget += ["--separate"] if args.separate else []
     results_dir = args.results_dir or (reduced_dir if reduced else defaults.results_dir)
 
-    runs = [run for study in studies for run in study.runs()]
-    pending = [run.spec for run in runs if not (run.spec.run_dir(args.cache_dir) / RUN_FILE).exists()]
     if args.list:
         for study in studies:
-            study_runs = study.runs()
+            study_runs = study.runs(sequential.seeds_planned(study))
             cached = sum((run.spec.run_dir(args.cache_dir) / RUN_FILE).exists() for run in study_runs)
+            seeds = f"{len(study.seeds)} seeds" if study.design is None else study.design.describe()
             console.print(
                 f"{study.name}: {len(study.variants)} variants × {len(study.readings)} "
-                f"{plural(len(study.readings), 'reading', 'readings')} × {len(study.seeds)} seeds, "
-                f"{study.budget.describe()}: {len(study_runs)} runs, {cached} cached",
+                f"{plural(len(study.readings), 'reading', 'readings')} × {seeds}, "
+                f"{study.budget.describe()}: {len(study_runs)} runs{'' if study.design is None else ' at most'}, "
+                f"{cached} cached",
                 highlight=False,
             )
         return 0
 
-    if not args.report_only and pending:
+    # Look by look: the runs the studies want now (every run of a fixed design; a sequential design's next look), run,
+    # then read again, until none is wanted. What a look ran is written before the next starts
+    ran, tried = False, set[str]()
+    while True:
+        try:
+            # All read before anything is written: a damaged cache entry names its folder, and no output is half done
+            loaded = [load_study_results(study, args.cache_dir, results_dir) for study in studies]
+        except DamagedRunError as error:
+            console.print(f"[red]{escape(str(error))}[/red]", highlight=False, soft_wrap=True)
+            return 2
+        pending = [run.spec for results in loaded for run in results.missing]
+        # (a run that failed is reported below, not tried again)
+        if args.report_only or not {spec.key() for spec in pending} - tried:
+            break
+        tried |= {spec.key() for spec in pending}
+        if ran:
+            write_outputs(studies, loaded, results_dir, budget, defaults, reduced, console, quiet=True)
         problems = check_settings(studies, {spec.key() for spec in pending}, console)
         if problems:
             console.print(
@@ -211,24 +228,46 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
                 soft_wrap=True,
             )
             return 2
+        for results in loaded:
+            if results.study.design is not None and results.missing:
+                console.print(f"{results.study.name}: {next_look(results)}", highlight=False)
         start = time.perf_counter()
-        status = run_missing_runs(len(runs), pending, args.workers, args.cache_dir, console, args.scheduler)
+        n_runs = sum(results.n_runs for results in loaded) + len(pending)
+        status = run_missing_runs(n_runs, pending, args.workers, args.cache_dir, console, args.scheduler)
         if status is not None:
             return status
         console.print(f"Runs: {time.perf_counter() - start:.0f} s")
+        ran = True
+    missing = [run.spec for results in loaded for run in results.missing]
+    write_outputs(studies, loaded, results_dir, budget, defaults, reduced, console)
+    return report_missing(missing, console, ran=not args.report_only)
 
+
+def next_look(results: StudyResults) -> str:
+    """:return: what a sequential study's next look runs and why, e.g. ``2 claims undecided: 20 runs, to 20 seeds``"""
+    undecided = [verdict for verdict in results.looks.values() if not verdict.decided]
+    wanted = sorted({verdict.next_seeds for verdict in undecided if verdict.next_seeds})
+    to = f", to {', '.join(map(str, wanted))} seeds per variant" if wanted else ""
+    count = len(undecided) or len(results.study.claims)
+    return f"{count} {plural(count, 'claim', 'claims')} undecided: {len(results.missing)} runs{to}"
+
+
+def write_outputs(
+    studies: Sequence[StudySpec],
+    loaded: Sequence[StudyResults],
+    results_dir: Path,
+    budget: Sequence[str],
+    defaults: Defaults,
+    reduced: bool,
+    console: Console,
+    quiet: bool = False,
+) -> None:
+    """Write each study's outputs and STUDIES.md, and say the verdicts (``quiet``: only where they were written)."""
     # The command each study's outputs show re-runs it from scratch: its file and the budget options
-    missing = []
-    try:
-        # All read before anything is written: a damaged cache entry names its folder, and no output is left half done
-        loaded = [load_study_results(study, args.cache_dir) for study in studies]
-    except DamagedRunError as error:
-        console.print(f"[red]{escape(str(error))}[/red]", highlight=False, soft_wrap=True)
-        return 2
     for study, results in zip(studies, loaded, strict=True):
-        missing += [run.spec for run in results.missing]
         path = write_study(results, results_dir, study_command(study, budget, defaults.program, defaults.root), reduced)
-        print_verdicts(results, console)
+        if not quiet:
+            print_verdicts(results, console)
         console.print(f"wrote {path}", highlight=False)
     catalogue = list(studies)
     if defaults.catalogue is not None and not reduced and results_dir.resolve() == defaults.results_dir.resolve():
@@ -240,7 +279,6 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
         ]
     index = write_studies_index(catalogue, results_dir, "Studies", defaults.program, defaults.root, budget, reduced)
     console.print(f"wrote {index}", highlight=False)
-    return report_missing(missing, console, ran=not args.report_only)
 
 
 def print_verdicts(results: StudyResults, console: Console) -> None:

@@ -4,6 +4,7 @@ its table (``<name>.md``, ``<name>.csv``) and its verdicts (``<name>.json``); an
 """
 
 import dataclasses
+import hashlib
 import json
 import math
 import shlex
@@ -21,9 +22,10 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from sb3_classic.harness.common import code_versions
+import sb3_classic
+from sb3_classic.harness.common import RunSpec, code_versions
 from sb3_classic.harness.runner import EPISODES_FILE, RUN_FILE, load_run, load_run_table
-from sb3_classic.studies import stats, untrained
+from sb3_classic.studies import sequential, stats, untrained
 from sb3_classic.studies.spec import STATED, StudyRun, StudySpec
 
 STUDIES_FILE = "STUDIES.md"
@@ -58,6 +60,11 @@ class StudyResults:
     :param lockstep_runs: the keys of the runs found that were trained in lockstep (``run.json``'s ``training``)
     :param random_levels: per (reading, variant) found, a uniformly random policy's mean return on its env and its
         interval over episodes (``untrained``; absent for an env without a time limit)
+    :param runs: per (reading, variant), each seed found's cache key when it ran, its settings' key
+        (``settings_key``), CPU seconds and training, for ``<name>-seeds.csv``
+    :param recorded: the runs found only in the study's committed ``<name>-seeds.csv`` (``recorded_seeds``): their
+        metrics, not their episodes (the figure and table draw the seeds in the cache)
+    :param looks: a sequential design's verdict of each claim as stated, by its text (``sequential``)
     """
 
     study: StudySpec
@@ -71,6 +78,9 @@ class StudyResults:
     lockstep_runs: set[str] = field(default_factory=set)
     random_levels: dict[tuple[str, str], stats.Interval] = field(default_factory=dict)
     n_runs: int = 0
+    runs: dict[tuple[str, str], list[dict[str, Any]]] = field(default_factory=dict)
+    recorded: int = 0
+    looks: dict[str, sequential.SequentialVerdict] = field(default_factory=dict)
 
     @property
     def runs_without_episodes(self) -> int:
@@ -83,33 +93,93 @@ class StudyResults:
         return math.fsum(self.run_seconds.values())
 
 
-def load_study_results(study: StudySpec, cache_dir: Path) -> StudyResults:
+def settings_key(spec: RunSpec) -> str:
+    """
+    :return: the key of a run's settings and seed without its code's digest (``RunSpec.key`` has it): a seed recorded
+        in a study's committed ``<name>-seeds.csv`` counts as run while its settings, seed and sb3_classic's release
+        are the same (the package keeps seeded training identical between releases' edits, ``benchmarks.digest``;
+        a change of results comes with a new release)
+    """
+    content = {
+        "hyperparams": spec.hyperparams,
+        "run": {name: getattr(spec, name) for name in ("algo", "env_id", "seed", "n_timesteps", "max_episodes", "lockstep")},
+        "release": sb3_classic.__version__,
+    }
+    return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def recorded_seeds(study: StudySpec, results_dir: Path | None) -> dict[str, dict[str, Any]]:
+    """
+    :param study: the study
+    :param results_dir: where its outputs were written (None: no records)
+    :return: the rows of its ``<name>-seeds.csv`` there, by ``settings_key``: the seeds run before, on this machine
+        or another, whose runs the cache may no longer hold
+    """
+    path = None if results_dir is None else results_dir / f"{study.name}-seeds.csv"
+    if path is None or not path.exists():
+        return {}
+    frame = pd.read_csv(path)
+    if "settings" not in frame.columns:
+        return {}
+    return {str(row["settings"]): row for row in frame.to_dict("records")}
+
+
+def load_study_results(study: StudySpec, cache_dir: Path, results_dir: Path | None = None) -> StudyResults:
     """
     :param study: the study
     :param cache_dir: the harness's cache
-    :return: its runs found in ``cache_dir``, their metrics and the claims' verdicts
+    :param results_dir: where the study's outputs are (its committed ``<name>-seeds.csv``: seeds not in the cache
+        count from it, ``recorded_seeds``)
+    :return: its runs found in ``cache_dir`` (or recorded), their metrics and the claims' verdicts; with a sequential
+        design, the runs of its next look missing
     :raise DamagedRunError: naming a cached run whose files cannot be read
     """
     results = StudyResults(study)
     frames: dict[tuple[str, str], list[pd.DataFrame]] = {}
-    for run in study.runs():
-        run_dir = run.spec.run_dir(cache_dir)
-        if not (run_dir / RUN_FILE).exists():
-            results.missing.append(run)
+    recorded = recorded_seeds(study, results_dir)
+    values: dict[tuple[str, str], list[dict[str, float]]] = {}
+    for run in study.runs(sequential.seeds_planned(study)):
+        run_dir, key = run.spec.run_dir(cache_dir), (run.reading, run.variant)
+        settings, record = settings_key(run.spec), None
+        if (run_dir / RUN_FILE).exists():
+            summary = load_run(run_dir)
+            seconds = float(summary["learn_time_s"]) + float(summary.get("eval_time_s", 0.0))
+            lockstep, run_key = summary.get("training") == "lockstep", run.spec.key()
+            frames.setdefault(key, []).append(load_run_table(run_dir, EPISODES_FILE, study.budget.episodes or 0))
+        elif settings in recorded:
+            record = recorded[settings]
+            seconds, lockstep, run_key = float(record["cpu_seconds"]), bool(record["lockstep"]), str(record["run"])
+            results.recorded += 1
+        else:
             continue
-        summary = load_run(run_dir)
-        results.run_seconds[run.spec.key()] = float(summary["learn_time_s"]) + float(summary.get("eval_time_s", 0.0))
-        if summary.get("training") == "lockstep":
-            results.lockstep_runs.add(run.spec.key())
+        results.run_seconds[run_key] = seconds
+        if lockstep:
+            results.lockstep_runs.add(run_key)
         results.n_runs += 1
-        episodes = load_run_table(run_dir, EPISODES_FILE, study.budget.episodes or 0)
-        frames.setdefault((run.reading, run.variant), []).append(episodes)
-        results.seeds.setdefault((run.reading, run.variant), []).append(run.seed)
-    for key, episodes in frames.items():
-        returns = stats.seed_returns(episodes, study.budget.episodes)
-        results.returns[key] = stats.returns_matrix(returns)
-        results.episode_counts[key] = [len(row) for row in returns]
-        results.metrics[key] = stats.seed_metrics(returns, study.threshold, study.threshold_window)
+        results.seeds.setdefault(key, []).append(run.seed)
+        results.runs.setdefault(key, []).append(
+            {"run": run_key, "settings": settings, "cpu_seconds": seconds, "lockstep": lockstep}
+        )
+        values.setdefault(key, []).append(record or {})
+    for key, found in values.items():
+        # Each seed's metrics: from its episodes where the cache has them, else as recorded
+        episodes = iter(frames.get(key, []))
+        rows = [None if record else next(episodes) for record in found]
+        cached = [frame for frame in rows if frame is not None]
+        returns = stats.seed_returns(cached, study.budget.episodes) if cached else []
+        computed = stats.seed_metrics(returns, study.threshold, study.threshold_window) if cached else {}
+        index = iter(range(len(cached)))
+        columns: dict[str, list[Any]] = {name: [] for name in (*stats.METRIC_LABELS, "reached")}
+        for record in found:
+            at = None if record else next(index)
+            for name, column in columns.items():
+                column.append(record.get(name, np.nan) if record else computed[name][at])
+        results.metrics[key] = {
+            name: np.asarray(column, dtype=bool if name == "reached" else float) for name, column in columns.items()
+        }
+        if cached:
+            results.returns[key] = stats.returns_matrix(returns)
+        results.episode_counts[key] = [len(row) for row in returns] or [study.budget.episodes or 0]
         results.random_levels.update(_random_level(study, key, cache_dir))
     for reading in study.readings:
         variants = {variant: results.metrics.get((reading, variant)) for variant in study.variants}
@@ -118,12 +188,28 @@ def load_study_results(study: StudySpec, cache_dir: Path) -> StudyResults:
         for claim in study.claims:
             needed = (claim.variant, *claim.others)
             if all(variants[variant] is not None for variant in needed):
-                metrics = {variant: variants[variant] for variant in needed}
-                result = stats.judge(claim, metrics)  # type: ignore[arg-type]
-                note = stats.untrained_note(claim, metrics, levels)  # type: ignore[arg-type]
+                metrics: dict[str, Any] = {variant: variants[variant] for variant in needed}
+                margin = sequential.claim_margin(study, claim)
+                if study.design is not None and reading == STATED:
+                    looked = sequential.judge_sequentially(claim, metrics, study.design, margin)
+                    if looked is None:
+                        continue
+                    results.looks[claim.text] = looked
+                    result = looked.result
+                else:
+                    first = study.design.looks[0] if study.design is not None else None
+                    result = stats.judge(claim, _first_seeds(metrics, first), margin=margin)
+                note = stats.untrained_note(claim, metrics, levels)
                 judged.append(dataclasses.replace(result, untrained=note))
         results.verdicts[reading] = judged
+    wanted = sequential.seeds_wanted(study, results.looks)
+    results.missing = [run for run in study.runs(wanted) if run.seed not in results.seeds.get((run.reading, run.variant), [])]
     return results
+
+
+def _first_seeds(metrics: dict[str, Any], n: int | None) -> dict[str, Any]:
+    """:return: each variant's metrics of its first ``n`` seeds (None: all)"""
+    return {name: {key: values[:n] for key, values in found.items()} for name, found in metrics.items()}
 
 
 def _random_level(study: StudySpec, key: tuple[str, str], cache_dir: Path) -> dict[tuple[str, str], stats.Interval]:
@@ -182,8 +268,9 @@ def seeds_frame(results: StudyResults) -> pd.DataFrame:
             row: dict[str, Any] = {"reading": reading, "variant": variant, "seed": seed}
             row |= {metric: float(metrics[metric][index]) for metric in metric_names}
             row |= {name: bool(metrics[name][index]) for name in reached}
-            rows.append(row)
-    return pd.DataFrame(rows, columns=["reading", "variant", "seed", *metric_names, *reached])
+            rows.append(row | results.runs[(reading, variant)][index])
+    columns = ["reading", "variant", "seed", *metric_names, *reached, "run", "settings", "cpu_seconds", "lockstep"]
+    return pd.DataFrame(rows, columns=columns)
 
 
 def summary_frame(results: StudyResults) -> pd.DataFrame:
@@ -254,7 +341,10 @@ def plot_study(results: StudyResults, path: Path) -> Path:
                 continue
             mean, low, high = stats.episode_band(stats.moving_average(returns, study.smooth))
             episodes = np.arange(1, len(mean) + 1)
-            (line,) = axis.plot(episodes, mean, label=f"{variant} ({returns.shape[0]} seeds)", linewidth=1.2)
+            found = len(results.seeds[(reading, variant)])
+            others = f" of {found}: the others recorded only" if found > returns.shape[0] else ""
+            drawn = f"{returns.shape[0]} seeds{others}"
+            (line,) = axis.plot(episodes, mean, label=f"{variant} ({drawn})", linewidth=1.2)
             axis.fill_between(episodes, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
         if has_threshold(study):
             axis.axhline(study.threshold, color="grey", linestyle=":", linewidth=1)
@@ -288,20 +378,26 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
     """
     study = results.study
     results_dir.mkdir(parents=True, exist_ok=True)
-    figure = plot_study(results, results_dir / f"{study.name}.png")
+    figure = results_dir / f"{study.name}.png"
+    if results.returns or not figure.exists():
+        # (runs counted from the seeds' record alone have no episodes to draw: the figure drawn before them is kept)
+        plot_study(results, figure)
     summary_frame(results).to_csv(results_dir / f"{study.name}.csv", index=False)
     seeds_frame(results).to_csv(results_dir / f"{study.name}-seeds.csv", index=False)
     claims = []
     for reading, judged in results.verdicts.items():
         for result in judged:
+            looked = results.looks.get(result.claim.text) if reading == STATED else None
             claims.append(
                 {
                     "text": result.claim.text,
                     "reading": reading,
                     "verdict": result.verdict,
-                    "measured": result.measured,
+                    "measured": result.measured + (f" ({_looks_taken(looked)})" if looked is not None else ""),
                     "favour": stats.favour(result),
                     **({"untrained": result.untrained} if result.untrained else {}),
+                    **({"seeds": looked.seeds, "looks": looked.looks_taken} if looked is not None else {}),
+                    **({"seeds_needed": looked.needed} if looked is not None and looked.needed else {}),
                 }
             )
     record = {
@@ -311,6 +407,7 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         "env_id": study.env_id,
         "algo": study.algo,
         "seeds": len(study.seeds),
+        **({"design": study.design.describe()} if study.design is not None else {}),
         "budget": study.budget.describe(),
         "command": command,
         "reduced": reduced,
@@ -338,11 +435,12 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         command,
         "```",
         "",
-        f"- {study.algo} on {study.env_id}, {len(study.seeds)} seeds per variant, {study.budget.describe()} per run "
+        f"- {study.algo} on {study.env_id}, {_seeds_line(study)}, {study.budget.describe()} per run "
         f"({results.n_runs} runs found, {len(results.missing)} missing; {results.learn_seconds / 3600:.2f} CPU hours for "
         f"the {len(results.run_seconds)} distinct ones{_trained_how(results)}).",
         _threshold_note(study, censored_at),
         f"- Intervals: {_intervals(_fewest_seeds(results))}; verdicts by the rule of [STUDIES.md](STUDIES.md).",
+        *_design_notes(results),
         *_random_level_notes(results),
         *_short_budget_notes(study),
         *_step_budget_notes(results),
@@ -352,13 +450,19 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         "## Claims",
         "",
     ]
-    if results.missing:
+    if results.missing and study.design is not None:
+        lines += [
+            f"**Looks to come**: the next look's {len(results.missing)} runs are not yet run (run the command again to "
+            "run them); the undecided claims' verdicts are of the looks taken.",
+            "",
+        ]
+    elif results.missing:
         lines += [
             f"**Partial**: {len(results.missing)} of {results.n_runs + len(results.missing)} runs are missing (run the "
             "command again to run them); the verdicts are of the runs found.",
             "",
         ]
-    partial = f" (partial: {len(results.missing)} runs missing)" if results.missing else ""
+    partial = f" (partial: {len(results.missing)} runs missing)" if results.missing and study.design is None else ""
     for reading, judged in results.verdicts.items():
         suffix = "" if reading == STATED else f" (reading `{reading}`)"
         by_text = {result.claim.text: result for result in judged}
@@ -367,7 +471,9 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
             if found is None:
                 lines.append(f"- **{NOT_RUN}**{suffix}: {claim.text} (the runs of a variant it compares are missing).")
             else:
-                line = f"- **{found.verdict}**{partial}{suffix}: {claim.text}. Measured: {found.measured}."
+                looked = results.looks.get(claim.text) if reading == STATED else None
+                taken = f" ({_looks_taken(looked)})" if looked is not None else ""
+                line = f"- **{found.verdict}**{partial}{suffix}: {claim.text}. Measured: {found.measured}{taken}."
                 lines.append(line + (f" **Not learned**: {found.untrained}." if found.untrained else ""))
     if len(results.verdicts) > 1:
         lines += ["", *_best_readings([claim.text for claim in study.claims], claims)]
@@ -533,6 +639,47 @@ def settings_yaml(settings: dict[str, Any]) -> str:
         two share a value): what a reader pastes into a zoo file
     """
     return yaml.dump(settings, Dumper=_SettingsDumper, sort_keys=False).rstrip()
+
+
+def _seeds_line(study: StudySpec) -> str:
+    """:return: the seeds per variant of the study's page: ``10 seeds per variant`` or its design's looks"""
+    if study.design is None:
+        return f"{len(study.seeds)} seeds per variant"
+    other = "; its other readings the first look's" if len(study.readings) > 1 else ""
+    return f"{study.design.describe()}{other}"
+
+
+def _looks_taken(looked: sequential.SequentialVerdict) -> str:
+    """:return: e.g. ``20 seeds per variant, look 2 of 4; ...`` and, undecided at the last look, the seeds needed"""
+    text = f"{looked.seeds} seeds per variant, look {looked.looks_taken}"
+    if looked.next_seeds:
+        text += f"; the next look at {looked.next_seeds}"
+    return text + (f"; {looked.needed}" if looked.needed else "")
+
+
+def _design_notes(results: StudyResults) -> list[str]:
+    """:return: what the study's sequential design and equivalence margin are, and its seeds recorded, not cached"""
+    study, notes = results.study, []
+    if study.design is not None:
+        notes.append(
+            f"- Sequential design: {study.design.describe()}; Welch's t-intervals (Student's for a level); a claim "
+            f"decided at a look keeps its verdict and draws no more seeds; {study.design.alpha:.0%} wrong verdicts per "
+            "claim when there is no difference, however early it stops (error-control.md)."
+        )
+    margins = sorted({margin for claim in study.claims if (margin := sequential.claim_margin(study, claim)) is not None})
+    if margins:
+        notes.append(
+            f"- Equivalence margin of the `better` claims: ±{', ±'.join(f'{margin:g}' for margin in margins)} (declared "
+            "in the study file, or 5% of the env's range of returns): a difference shown within it is *not supported: "
+            "alike*."
+        )
+    if results.recorded:
+        notes.append(
+            f"- {results.recorded} of the runs are counted from this folder's `{study.name}-seeds.csv` (run before; "
+            "the cache no longer holds them): their metrics count in the verdicts and the table, but without their "
+            "episodes the figure draws the seeds in the cache only."
+        )
+    return notes
 
 
 def _fewest_seeds(results: StudyResults) -> int:

@@ -10,7 +10,8 @@ The format (the documentation's page "Study files" has every field)::
     source: seed report Fig 15, §4.4.5      # where the claim comes from (optional)
     env: CartPole-v1                        # or module:EnvId, an env your module registers (mychain:Chain-v0)
     algo: nstep_sarsa                       # a key of rl_zoo3.ALGOS
-    seeds: 10                               # seeds 0–9, or a list
+    seeds: 10                               # seeds 0–9, or a list; or looks: {start: 10, step: 10, max: 40}
+    margin: 25                              # `better` claims alike within ±25 are decided (default: 5% of the range)
     budget: {episodes: 500}                 # or {steps: 100000}; {episodes: N, max_steps: M} caps the steps
     hyperparams:                            # the base, as an entry of the zoo's YAML
       policy: MlpPolicy
@@ -36,7 +37,7 @@ import math
 from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TypeGuard
+from typing import TYPE_CHECKING, Any, TypeGuard
 
 import gymnasium
 import rl_zoo3
@@ -56,6 +57,9 @@ from sb3_classic.harness.common import (
 from sb3_classic.harness.lockstep import plan_lockstep
 from sb3_classic.studies import untrained
 from sb3_classic.zoo import YAML_NAMES, yaml_float_string
+
+if TYPE_CHECKING:
+    from sb3_classic.studies.sequential import SequentialDesign
 
 METRICS = ("mean_return", "last_100_return", "episodes_to_threshold")
 CLAIM_KINDS = ("better", "similar", "reaches", "below")
@@ -79,6 +83,7 @@ _TOP_KEYS = (
     "env",
     "algo",
     "seeds",
+    "margin",
     "budget",
     "hyperparams",
     "vary",
@@ -178,6 +183,10 @@ class StudySpec:
     :param path: the file it was read from
     :param lockstep: train the seeds of each variant and reading in lockstep, one population of the algorithm, where
         the population covers the setting (``harness.lockstep.plan_lockstep``); False: each run alone (``--separate``)
+    :param design: seeds drawn in looks (``seeds: {start, step, max}``, ``sequential.SequentialDesign``), the study as
+        stated only (its other readings run the first look's seeds); None: every run of ``seeds``
+    :param margin: the equivalence margin of its ``better`` claims on a return (``sequential.claim_margin``), in the
+        return's units; None: no equivalence verdict
     """
 
     name: str
@@ -197,6 +206,8 @@ class StudySpec:
     notes: str = ""
     path: Path | None = field(default=None, compare=False)
     lockstep: bool = True
+    design: "SequentialDesign | None" = None
+    margin: float | None = None
 
     def zoo_entry(self, variant: str, reading: str = STATED) -> dict[str, Any]:
         """
@@ -227,12 +238,18 @@ class StudySpec:
         # Every episode at the time limit, and the unfinished episodes of the other envs
         return (self.budget.episodes + n_envs) * limit
 
-    def runs(self) -> list[StudyRun]:
-        """:return: every run of the study, seed by seed (an interrupted study has whole seeds done)"""
+    def runs(self, counts: Mapping[tuple[str, str], int] | None = None) -> list[StudyRun]:
+        """
+        :param counts: per (reading, variant), how many of the study's seeds to run, its first (a sequential design's
+            look: ``cli``); default: all of them
+        :return: those runs of the study, seed by seed (an interrupted study has whole seeds done)
+        """
         runs = []
-        for seed in self.seeds:
+        for index, seed in enumerate(self.seeds):
             for reading in self.readings:
                 for variant in self.variants:
+                    if counts is not None and index >= counts.get((reading, variant), 0):
+                        continue
                     label = f"{self.name} {variant}" + ("" if reading == STATED else f" [{reading}]") + f" seed {seed}"
                     entry = self.zoo_entry(variant, reading)
                     spec = RunSpec(
@@ -274,7 +291,10 @@ class StudySpec:
             budget = Budget(episodes=episodes, max_steps=budget.max_steps)
         if steps is not None:
             budget = Budget(steps=steps)
-        return dataclasses.replace(self, seeds=tuple(range(seeds)) if seeds is not None else self.seeds, budget=budget)
+        if seeds is not None:
+            # A reduced run is a fixed design of its seeds
+            return dataclasses.replace(self, seeds=tuple(range(seeds)), budget=budget, design=None)
+        return dataclasses.replace(self, budget=budget)
 
 
 def time_limit(spec: gymnasium.envs.registration.EnvSpec, env_kwargs: Mapping[str, Any] | None) -> int | None:
@@ -471,7 +491,7 @@ def load_study(path: Path | str) -> StudySpec:
 
     env_id, registration, algo = _env_and_algo(check, data)
 
-    seeds = _seeds(check, data.get("seeds", 10))
+    seeds, design = _seeds(check, data.get("seeds", 10))
     budget = _budget(check, data["budget"])
     hyperparams = check.hyperparams("hyperparams", data["hyperparams"], algo)
     uncapped = budget is not None and budget.episodes is not None and budget.max_steps is None
@@ -534,7 +554,10 @@ def load_study(path: Path | str) -> StudySpec:
         smooth=smooth,
         notes=str(data.get("notes", "")).strip(),
         path=path,
+        design=design,
+        margin=_margin(check, data, env_id, registration, settings),
     )
+    check.raise_if_any()
     _check_distinct_variants(check, study)
     return study
 
@@ -689,17 +712,89 @@ def _quote_hint(name: Any, variants: Mapping[str, Any]) -> str:
     return ""
 
 
-def _seeds(check: _Checker, value: Any) -> tuple[int, ...]:
+def _seeds(check: _Checker, value: Any) -> tuple[tuple[int, ...], "SequentialDesign | None"]:
+    """:return: the study's seeds, and its sequential design (``seeds: {start, step, max}``), if any"""
+    from sb3_classic.studies.sequential import BOUNDARIES, SequentialDesign  # (it imports the statistics, which import this)
+
+    if isinstance(value, Mapping):
+        fields = ("start", "step", "max", "boundary")
+        example = "seeds: {start: 10, step: 10, max: 40} (looks at 10, 20, 30, 40 seeds per variant)"
+        unknown = sorted(set(map(str, value)) - set(fields))
+        for key in unknown:
+            close = difflib.get_close_matches(key, fields, n=1)
+            check.fail(f"seeds.{key}", "unknown field" + (f": did you mean {close[0]!r}?" if close else f"; {example}"))
+        missing = [key for key in ("start", "max") if key not in value]
+        if missing:
+            check.fail("seeds", f"{dict(value)!r} lacks {' and '.join(missing)}: {example}")
+        counts = {key: check.positive_int(f"seeds.{key}", value[key]) for key in ("start", "step", "max") if key in value}
+        boundary = value.get("boundary", "pocock")
+        if boundary not in BOUNDARIES:
+            check.fail("seeds.boundary", f"{boundary!r}: choose one of {', '.join(BOUNDARIES)}")
+        start, step, most = counts.get("start"), counts.get("step", counts.get("start")), counts.get("max")
+        if unknown or missing or None in (start, step, most) or boundary not in BOUNDARIES:
+            return (), None
+        assert start is not None
+        assert step is not None
+        assert most is not None
+        if start < MIN_LOOK_SEEDS:
+            check.fail(
+                "seeds.start", f"{start}: the first look needs at least {MIN_LOOK_SEEDS} seeds per variant for an interval"
+            )
+        if most < start:
+            check.fail("seeds.max", f"{most} is below start ({start}): the last look has the most seeds")
+        return tuple(range(max(most, start))), SequentialDesign(start, step, most, boundary)
     if isinstance(value, int) and not isinstance(value, bool):
         if value < 1:
             check.fail("seeds", f"{value}: give the number of seeds (at least 1; the studies use 10) or a list")
-        return tuple(range(value))
+        return tuple(range(value)), None
     if isinstance(value, list) and value and all(_is_int(seed) and seed >= 0 for seed in value):
         if len(set(value)) < len(value):
             check.fail("seeds", f"{value}: a seed appears twice")
-        return tuple(value)
-    check.fail("seeds", f"{value!r}: give a number of seeds (seeds 0 to k − 1) or a list of non-negative integers")
-    return ()
+        return tuple(value), None
+    check.fail(
+        "seeds",
+        f"{value!r}: give a number of seeds (seeds 0 to k − 1), a list of non-negative integers, or looks, "
+        "{start: 10, step: 10, max: 40}",
+    )
+    return (), None
+
+
+#: The fewest seeds per variant of a sequential design's first look (the statistics' ``MIN_SEEDS``)
+MIN_LOOK_SEEDS = 5
+#: The default equivalence margin: this fraction of the env's range of returns (``STEP_REWARDS``)
+MARGIN_FRACTION = 0.05
+
+
+def return_range(env_id: str, env_spec: Any, settings: Sequence[Mapping[str, Any]]) -> tuple[float, float] | None:
+    """
+    :return: the lowest and highest return of an episode of the env (``STEP_REWARDS``), or None where unknown (another
+        env, or settings that give an ``env_wrapper`` or ``env_kwargs``, which may change its time limit)
+    """
+    limit = env_spec.max_episode_steps if env_spec is not None else None
+    wrapped = any({"env_wrapper", "env_kwargs"} & set(setting) for setting in settings)
+    if env_id not in STEP_REWARDS or limit is None or wrapped:
+        return None
+    low, high = STEP_REWARDS[env_id]
+    return min(low, limit * low), max(high, limit * high)
+
+
+def _margin(check: _Checker, data: Mapping[str, Any], env_id: str, env_spec: Any, settings: Sequence[Any]) -> float | None:
+    """:return: the study's equivalence margin: its ``margin:``, else 5% of the env's range of returns (two significant
+    figures: 25 on CartPole-v1 and Acrobot-v1), else None"""
+    if "margin" in data:
+        margin = data["margin"]
+        if not _is_number(margin) or margin <= 0:
+            check.fail(
+                "margin",
+                f"{margin!r}: the largest difference of returns that counts as alike, a positive number declared before "
+                "running, e.g. margin: 25",
+            )
+            return None
+        return float(margin)
+    returns = return_range(env_id, env_spec, settings)
+    if returns is None:
+        return None
+    return float(f"{MARGIN_FRACTION * (returns[1] - returns[0]):.2g}")
 
 
 def _budget(check: _Checker, value: Any) -> Budget | None:
@@ -827,12 +922,12 @@ def _check_return_levels(
     ``STEP_REWARDS`` with their registered time limit (not where the hyperparameters, a variant's or a reading's, give
     an ``env_wrapper`` or ``env_kwargs``, which may change it).
     """
-    limit = env_spec.max_episode_steps if env_spec is not None else None
-    wrapped = any({"env_wrapper", "env_kwargs"} & set(setting) for setting in settings)
-    if env_id not in STEP_REWARDS or limit is None or wrapped:
+    returns = return_range(env_id, env_spec, settings)
+    if returns is None:
         return
     low, high = STEP_REWARDS[env_id]
-    lowest, highest = min(low, limit * low), max(high, limit * high)
+    limit = env_spec.max_episode_steps
+    lowest, highest = returns
     per_step = f"a reward in [{low:g}, {high:g}] per step, 1 to {limit} steps"
     what = f"{env_id}'s returns lie in [{lowest:g}, {highest:g}] ({per_step})"
     # (a threshold that is not a number has its own message)

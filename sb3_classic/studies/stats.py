@@ -16,6 +16,8 @@ The rule (also in ``STUDIES.md``):
   level) is the opposite claim. Both compare on the metric's own scale, whichever way is better: "the spread is
   below 20", "episodes to threshold below 200".
 
+- With an equivalence margin m (``judge``'s ``margin``: a sequential design's, ``sb3_classic.studies.sequential``), a
+  ``better`` comparison whose interval lies within ± m is decided: *not supported: alike within ±m*.
 - Any claim whose variants have fewer than ``MIN_SEEDS`` seeds is *too close to call*, whatever its intervals: a
   bootstrap over 2–4 values gives an interval, but not a 95% one.
 - Episodes to threshold is censored: a seed that never reaches the threshold counts as its episode budget, a lower
@@ -26,6 +28,12 @@ The rule (also in ``STUDIES.md``):
 
 Statistics over seeds: ``mean`` (the mean over seeds) or ``std`` (their sample standard deviation: a claim of
 consistent learning across seeds, where lower is better).
+
+Intervals (``INTERVAL_METHODS``): ``bootstrap``, BCa over seeds at 95%, the fixed design's; ``t``, Student's interval of
+a mean and Welch's of a difference of means (``scipy.stats.ttest_1samp``, ``ttest_ind``), the sequential design's at
+each look's level. At 5–40 seeds of skewed, bounded returns the bootstrap's intervals are too narrow at the higher
+levels a sequential design's looks need (``benchmarks/results/studies/error-control.md``); a spread (``std``) has no
+t-interval and keeps the bootstrap.
 """
 
 from collections.abc import Callable, Mapping, Sequence
@@ -40,12 +48,16 @@ from sb3_classic.studies.spec import Claim
 
 CONFIDENCE = 0.95
 N_RESAMPLES = 10_000
+#: How an interval over seeds is computed (the module's docstring)
+INTERVAL_METHODS = ("bootstrap", "t")
 #: Episodes of the "last episodes" metric
 LAST_EPISODES = 100
 SUPPORTED = "supported"
 NOT_SUPPORTED = "not supported"
 REVERSED = "reversed"
 TOO_CLOSE = "too close to call"
+#: A ``better`` comparison whose interval lies within ± the margin (``alike``)
+ALIKE = "alike within"
 #: Fewer seeds than this in a variant of a claim: no verdict but too close to call (the report ran 5, the studies 10)
 MIN_SEEDS = 5
 METRIC_LABELS = {
@@ -157,12 +169,17 @@ def _statistic(name: str) -> Callable[..., Any]:
     raise ValueError(f"statistic={name!r}: choose 'mean' or 'std'")
 
 
-def interval(values: np.ndarray, statistic: str = "mean", seed: int = 0) -> Interval:
+def interval(
+    values: np.ndarray, statistic: str = "mean", seed: int = 0, confidence: float = CONFIDENCE, method: str = "bootstrap"
+) -> Interval:
     """
     :param values: one value per seed
     :param statistic: ``mean`` or ``std``
     :param seed: of the resampling
-    :return: the statistic and its 95% bootstrap interval (BCa; percentile where BCa is undefined)
+    :param confidence: the interval's level
+    :param method: ``bootstrap`` (BCa; percentile where BCa is undefined) or ``t`` (Student's, of a mean; a ``std``
+        keeps the bootstrap)
+    :return: the statistic and its interval
     """
     values = np.asarray(values, dtype=float)
     function = _statistic(statistic)
@@ -173,16 +190,28 @@ def interval(values: np.ndarray, statistic: str = "mean", seed: int = 0) -> Inte
         return Interval(estimate, float("nan"), float("nan"))
     if np.ptp(values) == 0:
         return Interval(estimate, estimate, estimate)
-    return _bootstrap((values,), lambda x, axis=-1: function(x, axis=axis), estimate, seed)
+    if method == "t" and statistic == "mean":
+        bounds = stats.ttest_1samp(values, 0.0).confidence_interval(confidence)
+        return Interval(estimate, float(bounds.low), float(bounds.high))
+    return _bootstrap((values,), lambda x, axis=-1: function(x, axis=axis), estimate, seed, confidence)
 
 
-def difference_interval(a: np.ndarray, b: np.ndarray, statistic: str = "mean", seed: int = 0) -> Interval:
+def difference_interval(
+    a: np.ndarray,
+    b: np.ndarray,
+    statistic: str = "mean",
+    seed: int = 0,
+    confidence: float = CONFIDENCE,
+    method: str = "bootstrap",
+) -> Interval:
     """
     :param a: one value per seed of a variant
     :param b: the same of another (not paired: seeds are independent runs)
     :param statistic: ``mean`` or ``std``
     :param seed: of the resampling
-    :return: statistic(a) − statistic(b) and its 95% bootstrap interval
+    :param confidence: the interval's level
+    :param method: ``bootstrap`` (BCa) or ``t`` (Welch's, of a difference of means; a ``std`` keeps the bootstrap)
+    :return: statistic(a) − statistic(b) and its interval
     """
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     function = _statistic(statistic)
@@ -192,17 +221,23 @@ def difference_interval(a: np.ndarray, b: np.ndarray, statistic: str = "mean", s
         return Interval(estimate, float("nan"), float("nan"))
     if np.ptp(a) == 0 and np.ptp(b) == 0:
         return Interval(estimate, estimate, estimate)
-    return _bootstrap((a, b), lambda x, y, axis=-1: function(x, axis=axis) - function(y, axis=axis), estimate, seed)
+    if method == "t" and statistic == "mean":
+        bounds = stats.ttest_ind(a, b, equal_var=False).confidence_interval(confidence)
+        return Interval(estimate, float(bounds.low), float(bounds.high))
+    difference = lambda x, y, axis=-1: function(x, axis=axis) - function(y, axis=axis)  # noqa: E731
+    return _bootstrap((a, b), difference, estimate, seed, confidence)
 
 
-def _bootstrap(data: tuple[np.ndarray, ...], statistic: Callable[..., np.ndarray], estimate: float, seed: int) -> Interval:
+def _bootstrap(
+    data: tuple[np.ndarray, ...], statistic: Callable[..., np.ndarray], estimate: float, seed: int, confidence: float
+) -> Interval:
     for method in ("BCa", "percentile"):
         with np.errstate(invalid="ignore", divide="ignore"):
             result = stats.bootstrap(
                 data,
                 statistic,
                 n_resamples=N_RESAMPLES,
-                confidence_level=CONFIDENCE,
+                confidence_level=confidence,
                 method=method,
                 vectorized=True,
                 paired=False,
@@ -315,10 +350,20 @@ def favour(result: ClaimResult) -> float:
     return float(-np.max(np.abs(estimates)))
 
 
-def judge(claim: Claim, metrics: Mapping[str, Mapping[str, np.ndarray]]) -> ClaimResult:
+def judge(
+    claim: Claim,
+    metrics: Mapping[str, Mapping[str, np.ndarray]],
+    confidence: float = CONFIDENCE,
+    method: str = "bootstrap",
+    margin: float | None = None,
+) -> ClaimResult:
     """
     :param claim: the claim
     :param metrics: per variant, its ``seed_metrics``
+    :param confidence: the level of its intervals
+    :param method: how they are computed (``INTERVAL_METHODS``)
+    :param margin: a ``better`` claim's equivalence margin, in the metric's units: a comparison whose interval lies
+        within ± it is *not supported: alike within ±margin* (None: no such verdict)
     :return: the verdict by the rule of this module's docstring
     """
     sign = 1.0 if higher_is_better(claim) else -1.0
@@ -329,10 +374,14 @@ def judge(claim: Claim, metrics: Mapping[str, Mapping[str, np.ndarray]]) -> Clai
     if claim.kind in ("better", "similar"):
         parts = []
         for other in claim.others:
-            difference = difference_interval(ours, metrics[other][claim.metric], claim.statistic)
+            difference = difference_interval(
+                ours, metrics[other][claim.metric], claim.statistic, confidence=confidence, method=method
+            )
             if claim.kind == "better":
                 oriented = sorted((sign * difference.low, sign * difference.high))
                 verdict = _directional(oriented[0], oriented[1])
+                if verdict == TOO_CLOSE and margin is not None and _similar(difference, margin) == SUPPORTED:
+                    verdict = alike(margin)
             else:
                 assert claim.margin is not None
                 verdict = _similar(difference, claim.margin)
@@ -341,21 +390,15 @@ def judge(claim: Claim, metrics: Mapping[str, Mapping[str, np.ndarray]]) -> Clai
             # (each comparison's verdict where there are several: the claim's own is given beside it)
             each = f" ({verdict})" if len(claim.others) > 1 else ""
             parts.append(f"{claim.variant} − {other}: {_signed(difference)}{each}")
-        verdicts = [comparison.verdict for comparison in comparisons]
-        if all(verdict == SUPPORTED for verdict in verdicts):
-            overall = SUPPORTED
-        elif claim.kind == "better" and all(verdict == REVERSED for verdict in verdicts):
-            overall = REVERSED
-        elif any(verdict in (REVERSED, NOT_SUPPORTED) for verdict in verdicts):
-            overall = NOT_SUPPORTED
-        else:
-            overall = TOO_CLOSE
+        overall = _overall(claim, [comparison.verdict for comparison in comparisons], margin)
         measured = f"{what}: " + "; ".join(parts)
         if claim.kind == "similar":
             measured += f" (similar: within ±{claim.margin:g})"
+        elif margin is not None:
+            measured += f" (equivalence margin ±{margin:g})"
     else:
         assert claim.value is not None
-        value = interval(ours, claim.statistic)
+        value = interval(ours, claim.statistic, confidence=confidence, method=method)
         # On the metric's own scale, whichever way is better: "reaches" is ≥ the level, "below" is < it
         low, high = value.low - claim.value, value.high - claim.value
         if np.isnan(low):
@@ -387,6 +430,34 @@ def judge(claim: Claim, metrics: Mapping[str, Mapping[str, np.ndarray]]) -> Clai
         overall = TOO_CLOSE
         measured += f" (only {n_seeds} seeds in a variant: too few for a verdict, at least {MIN_SEEDS} are needed)"
     return ClaimResult(claim, overall, tuple(comparisons), measured)
+
+
+def _overall(claim: Claim, verdicts: Sequence[str], margin: float | None) -> str:
+    """:return: the verdict of a claim over several variants from those of its comparisons (the module's docstring)"""
+    if all(verdict == SUPPORTED for verdict in verdicts):
+        return SUPPORTED
+    if claim.kind == "better" and all(verdict == REVERSED for verdict in verdicts):
+        return REVERSED
+    if margin is not None and all(verdict == alike(margin) for verdict in verdicts):
+        return alike(margin)
+    if any(verdict in (REVERSED, NOT_SUPPORTED) or is_alike(verdict) for verdict in verdicts):
+        return NOT_SUPPORTED
+    return TOO_CLOSE
+
+
+def alike(margin: float) -> str:
+    """:return: the verdict of a ``better`` comparison shown within ± ``margin``: ``not supported: alike within ±25``"""
+    return f"{NOT_SUPPORTED}: {ALIKE} ±{margin:g}"
+
+
+def is_alike(verdict: str) -> bool:
+    """:return: whether ``verdict`` is ``alike``'s"""
+    return verdict.startswith(f"{NOT_SUPPORTED}: {ALIKE}")
+
+
+def is_decided(verdict: str) -> bool:
+    """:return: whether ``verdict`` decides its claim (anything but too close to call)"""
+    return verdict != TOO_CLOSE
 
 
 def censored_verdict(
@@ -429,7 +500,7 @@ def censored_verdict(
             return verdict
     elif not any(metrics[name]["reached"].any() for name in names):
         notes.append(f"no seed of {claim.variant} or {other} reached it: both are the budget, nothing was measured")
-    elif claim.kind == "similar" and verdict == SUPPORTED:
+    elif (claim.kind == "similar" and verdict == SUPPORTED) or is_alike(verdict):
         notes.append("alike within the budget does not show them alike beyond it: too close to call")
     else:
         return verdict
