@@ -12,7 +12,7 @@ import pytest
 from sb3_classic.common.population import MemberError
 from sb3_classic.harness import common, lockstep, runner
 from sb3_classic.harness.common import RunSpec
-from sb3_classic.harness.lockstep import lockstep_jobs, plan_lockstep, refusal
+from sb3_classic.harness.lockstep import lockstep_jobs, plan_lockstep, refusal, training_plan
 from sb3_classic.harness.runner import RunError, RunResult, execute_population
 from sb3_classic.sarsa.lockstep import NStepSARSAPopulation
 
@@ -40,6 +40,15 @@ def test_the_seeds_of_a_covered_setting_are_planned_in_lockstep() -> None:
     assert planned[2].key() == plain[2].key()
     assert planned[0].setting_key() == planned[1].setting_key() != planned[1].key()
     assert [run.lockstep for run in plan_lockstep(plain, enabled=False)] == [False] * 5
+    # Each run trained alone is told why, and what would train its setting's seeds together
+    reasons = training_plan(plain)
+    assert reasons[:2] == [None, None]
+    assert reasons[2] == reasons[3] == refusal("nstep_sarsa", "CartPole-v1", LINEAR)
+    assert reasons[2] is not None
+    assert reasons[2].startswith("policy='LinearPolicy' has its own SGD update, not a stacked network's; use 'MlpPolicy'")
+    assert reasons[4] == lockstep.ONE_SEED
+    assert training_plan(plain, enabled=False) == [lockstep.SEPARATE] * 5
+    assert training_plan(planned) == reasons  # (the plan's mark in the key aside)
     # Peers have no population: their runs are trained alone without a model being built to ask
     assert not any(run.lockstep for run in plan_lockstep([spec(0, algo="a2c"), spec(1, algo="a2c")]))
     # One job per population (by seed), one per run trained alone, in the order of their first run

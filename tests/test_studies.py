@@ -31,7 +31,7 @@ from rich.console import Console
 from benchmarks.common import REPO_ROOT
 from benchmarks.studies import SEED_REPORT_STUDIES
 from sb3_classic import REINFORCE, NStepSARSA
-from sb3_classic.harness import pool
+from sb3_classic.harness import lockstep, pool
 from sb3_classic.harness.common import RunSpec, code_versions
 from sb3_classic.harness.runner import check_run, execute_run
 from sb3_classic.studies import cli as studies_cli
@@ -1131,6 +1131,36 @@ def test_a_study_of_ones_own_env_runs_end_to_end(tmp_path: Path, capsys: pytest.
     capsys.readouterr()
     assert studies_cli.main([*command, "--list"]) == 0
     assert "4 runs, 4 cached" in capsys.readouterr().out
+
+
+def test_the_summary_and_the_page_say_how_each_variants_seeds_train(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Only each run's run.json said "training": "alone" (a population covers Box observations, not FrozenLake-v1's
+    # Discrete ones), and nothing said when seeds did train together. No run is needed to say it: the plan says it
+    frozen = TINY.replace("env: CartPole-v1", "env: FrozenLake-v1").replace("title: Tiny", "title: Frozen")
+    files = [write_study(tmp_path, TINY, "cart.yml"), write_study(tmp_path, frozen, "frozen.yml")]
+    files.append(write_study(tmp_path, TINY.replace("seeds: 2", "seeds: [3]"), "one.yml"))
+    mixed = TINY.replace("n1: {n_steps: 1}", "n1: {n_steps: 1, policy: LinearPolicy, policy_kwargs: {net_arch: []}}")
+    files.append(write_study(tmp_path, mixed, "mixed.yml"))
+    options = ["--report-only", "--cache-dir", str(tmp_path / "cache"), "--results-dir", str(tmp_path / "results")]
+    studies_cli.main([*map(str, files), *options])
+    printed = capsys.readouterr().out
+    together = "each variant's 2 seeds trained together, as one population (lockstep)"
+    discrete = (
+        "each variant's seeds trained one by one: observation_space=Discrete(16): a population's stacked networks take "
+        "flat Box observations; train this setting one model after the other (model.learn), or wrap the env to give "
+        "Box observations"
+    )
+    one_seed = f"each variant's seeds trained one by one: {lockstep.ONE_SEED}"
+    linear = "`n1`: seeds trained one by one: policy='LinearPolicy' has its own SGD update"
+    expected = {"cart": together, "frozen": discrete, "one": one_seed, "mixed": linear}
+    for name, how in expected.items():
+        assert f"{name}: {how}" in printed, printed  # the summary
+        assert f"- Training: {how}" in (tmp_path / "results" / f"{name}.md").read_text()  # the page
+    assert "; `n3`: 2 seeds trained together, as one population (lockstep)" in (tmp_path / "results" / "mixed.md").read_text()
+    studies_cli.main([str(files[0]), *options, "--separate"])
+    assert f"cart: each variant's seeds trained one by one: {lockstep.SEPARATE}" in capsys.readouterr().out
 
 
 def test_a_verdict_between_variants_that_did_not_learn_says_so(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

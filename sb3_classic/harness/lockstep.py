@@ -6,6 +6,7 @@ Which runs train in lockstep: the seeds of one setting, as one population of the
 
 import importlib
 import io
+import re
 from collections.abc import Callable, Sequence
 from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import replace
@@ -40,7 +41,7 @@ def refusal(algo: str, env_id: str, hyperparams_yaml: str) -> str | None:
     """
     checker = population_checker(algo)
     if checker is None:
-        return f"{algo} has no population class"
+        return f"{algo} has no population class: only reinforce's and nstep_sarsa's seeds train together"
     try:
         with redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
             model = built_model(RunSpec(algo, env_id, 0, 1, 0, 1, hyperparams_yaml))
@@ -49,11 +50,43 @@ def refusal(algo: str, env_id: str, hyperparams_yaml: str) -> str | None:
     try:
         checker([model])
     except (TypeError, ValueError) as error:
-        return str(error)
+        # (the one member checked is this setting, not a member of the user's)
+        return re.sub(r"^member 0 \(seed \d+\): ", "", str(error))
     finally:
         assert model.env is not None
         model.env.close()
     return None
+
+
+#: Why the runs of a command given ``--separate`` train alone
+SEPARATE = "--separate: every run alone (without it, the seeds of a setting that a population covers train together)"
+#: Why a setting with one seed among a command's runs trains alone
+ONE_SEED = "one seed: a population trains two or more seeds of one setting together"
+
+
+def training_plan(specs: Sequence[RunSpec], enabled: bool = True) -> list[str | None]:
+    """
+    :param specs: a command's runs
+    :param enabled: False: every run is trained alone (``--separate``)
+    :return: per run, in order: None if its setting's seeds train together, one population of its algorithm; else why
+        they train one by one, and what would train them together (``SEPARATE``, ``ONE_SEED``, or ``refusal``'s reason)
+    """
+    # (a setting's key without the plan's mark, which is part of it)
+    keys = [replace(spec, lockstep=False).setting_key() for spec in specs]
+    seeds: dict[str, set[int]] = {}
+    for key, spec in zip(keys, specs, strict=True):
+        seeds.setdefault(key, set()).add(spec.seed)
+    reasons: dict[str, str | None] = {}
+    for key, spec in zip(keys, specs, strict=True):
+        if key in reasons:
+            continue
+        if not enabled:
+            reasons[key] = SEPARATE
+        elif len(seeds[key]) < 2:
+            reasons[key] = ONE_SEED
+        else:
+            reasons[key] = refusal(spec.algo, spec.env_id, spec.hyperparams_yaml)
+    return [reasons[key] for key in keys]
 
 
 def plan_lockstep(specs: Sequence[RunSpec], enabled: bool = True) -> list[RunSpec]:
@@ -61,21 +94,10 @@ def plan_lockstep(specs: Sequence[RunSpec], enabled: bool = True) -> list[RunSpe
     :param specs: a command's runs
     :param enabled: False: every run is trained alone (``--separate``)
     :return: the same runs, in the same order, those whose setting has two seeds or more among ``specs`` and is
-        covered by its algorithm's population (``refusal``) marked ``lockstep`` (their cache key says so), the others
-        trained alone
+        covered by its algorithm's population (``training_plan``, ``refusal``) marked ``lockstep`` (their cache key
+        says so), the others trained alone
     """
-    specs = [replace(spec, lockstep=False) for spec in specs]
-    if not enabled:
-        return specs
-    seeds: dict[str, set[int]] = {}
-    for spec in specs:
-        seeds.setdefault(spec.setting_key(), set()).add(spec.seed)
-    return [
-        replace(spec, lockstep=True)
-        if len(seeds[spec.setting_key()]) > 1 and refusal(spec.algo, spec.env_id, spec.hyperparams_yaml) is None
-        else spec
-        for spec in specs
-    ]
+    return [replace(spec, lockstep=reason is None) for spec, reason in zip(specs, training_plan(specs, enabled), strict=True)]
 
 
 def lockstep_jobs(specs: Sequence[RunSpec]) -> list[tuple[RunSpec, ...]]:

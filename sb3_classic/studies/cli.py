@@ -26,6 +26,7 @@ from sb3_classic.studies.outputs import (
     load_study_results,
     plural,
     study_command,
+    training_summary,
     write_studies_index,
     write_study,
 )
@@ -282,8 +283,12 @@ def write_outputs(
 
 
 def print_verdicts(results: StudyResults, console: Console) -> None:
-    """Say each claim's verdict under each reading, and where its variants did not learn (``stats.untrained_note``)."""
+    """
+    Say how the study's seeds trained (``outputs.training_summary``), each claim's verdict under each reading, and where
+    its variants did not learn (``stats.untrained_note``).
+    """
     study = results.study
+    console.print(f"{study.name}: {training_summary(study)}", highlight=False, markup=False, soft_wrap=True)
     for reading, judged in results.verdicts.items():
         for result in judged:
             where = "" if len(results.verdicts) == 1 else f" [{reading}]"

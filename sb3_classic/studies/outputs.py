@@ -24,6 +24,7 @@ import yaml
 
 import sb3_classic
 from sb3_classic.harness.common import RunSpec, code_versions
+from sb3_classic.harness.lockstep import training_plan
 from sb3_classic.harness.runner import EPISODES_FILE, RUN_FILE, load_run, load_run_table
 from sb3_classic.studies import sequential, stats, untrained
 from sb3_classic.studies.spec import STATED, StudyRun, StudySpec
@@ -228,6 +229,30 @@ def _trained_how(results: StudyResults) -> str:
     if lockstep == len(results.run_seconds):
         return ", trained in lockstep: each variant's seeds one population"
     return f", {lockstep} of them trained in lockstep"
+
+
+def training_summary(study: StudySpec) -> str:
+    """
+    :return: how the seeds of each variant (and reading) train, as planned (``harness.lockstep.training_plan``):
+        together, one population of the algorithm, or one by one, with why and what would train them together; one
+        phrase for the study where every variant trains alike
+    """
+    runs = study.runs()
+    reasons: dict[tuple[str, str], str | None] = {}
+    seeds: dict[tuple[str, str], int] = {}
+    for run, reason in zip(runs, training_plan([run.spec for run in runs], study.lockstep), strict=True):
+        reasons.setdefault((run.reading, run.variant), reason)
+        seeds[(run.reading, run.variant)] = seeds.get((run.reading, run.variant), 0) + 1
+    groups: dict[str, list[str]] = {}
+    for (reading, variant), reason in reasons.items():
+        if reason is None:
+            how = f"{seeds[(reading, variant)]} seeds trained together, as one population (lockstep)"
+        else:
+            how = f"seeds trained one by one: {reason}"
+        groups.setdefault(how, []).append(f"`{variant}`" + ("" if reading == STATED else f" [{reading}]"))
+    if len(groups) == 1:
+        return f"each variant's {next(iter(groups))}"
+    return "; ".join(f"{', '.join(names)}: {how}" for how, names in groups.items())
 
 
 def study_command(study: StudySpec, extra: Sequence[str] = (), program: str = PROGRAM, root: Path | None = None) -> str:
@@ -438,6 +463,7 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         f"- {study.algo} on {study.env_id}, {_seeds_line(study)}, {study.budget.describe()} per run "
         f"({results.n_runs} runs found, {len(results.missing)} missing; {results.learn_seconds / 3600:.2f} CPU hours for "
         f"the {len(results.run_seconds)} distinct ones{_trained_how(results)}).",
+        f"- Training: {training_summary(study)}.",
         _threshold_note(study, censored_at),
         f"- Intervals: {_intervals(_fewest_seeds(results))}; verdicts by the rule of [STUDIES.md](STUDIES.md).",
         *_design_notes(results),
