@@ -8,6 +8,7 @@ import inspect
 import io
 import json
 import math
+import queue
 import re
 import shlex
 import shutil
@@ -15,8 +16,10 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 import warnings
 from collections.abc import Iterator
+from concurrent.futures import Future
 from pathlib import Path
 from typing import Any
 
@@ -741,6 +744,58 @@ def test_runs_shared_by_readings_or_studies_are_run_once(tmp_path: Path, monkeyp
     assert status is None
     assert ran == [shared, other]
     assert "3 runs: 0 cached, 2 to run on 1 worker (1 of them the same runs as others)" in output.getvalue()
+
+
+def test_the_overall_progress_moves_as_the_runs_train(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # It sat at 0% and then jumped as populations ended (its reports were read every 0.5 s, when a run's end had often
+    # come first). A population of 2 runs that reports a quarter and a half of its env steps, then ends 0.4 s later
+    base = RunSpec("reinforce", "CartPole-v1", 0, 1000, 0, 2, "policy: MlpPolicy\n", label="a seed 0", lockstep=True)
+    specs = [base, dataclasses.replace(base, seed=1, label="a seed 1")]
+    ended: list[float] = []
+
+    class Population:
+        progress: "queue.Queue[tuple[str, int]]" = queue.Queue()
+
+        def submit_population(self, job: list[RunSpec]) -> "Future[list[Any]]":
+            future: Future[list[Any]] = Future()
+
+            def train() -> None:
+                for steps in (250, 500):
+                    for spec in job:
+                        self.progress.put((spec.name, steps))
+                    time.sleep(0.2)
+                ended.append(time.perf_counter())
+                future.set_result([None] * len(job))
+
+            threading.Thread(target=train, daemon=True).start()
+            return future
+
+        def cancel(self) -> None:
+            pass
+
+    shown: list[tuple[float, str, float]] = []
+
+    class Recorded(pool.Progress):
+        def add_task(self, description: str, *args: Any, **kwargs: Any) -> Any:
+            shown.append((time.perf_counter(), description, 0.0))
+            return super().add_task(description, *args, **kwargs)
+
+        def advance(self, task_id: Any, advance: float = 1) -> None:
+            super().advance(task_id, advance)
+            task = self.tasks[0]
+            shown.append((time.perf_counter(), task.description, task.percentage))
+
+    monkeypatch.setattr(pool, "open_runs", lambda *args: contextlib.nullcontext(Population()))
+    monkeypatch.setattr(pool, "Progress", Recorded)
+    monkeypatch.setattr(pool, "_store", lambda *args: None)
+    assert pool.run_pending(specs, 1, tmp_path, Console(file=io.StringIO())) == []
+    (end,) = ended
+    before_the_end = [percentage for at, _, percentage in shown if at < end]
+    assert before_the_end, shown
+    assert 0 < max(before_the_end) <= 50
+    # Until the first report it says the workers are building the models; then it counts the runs
+    assert shown[0][1] == "2 runs (starting: building the models)"
+    assert shown[-1][1:] == ("2 runs", 100)
 
 
 def test_sigterm_stops_the_runs_as_ctrl_c_does(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

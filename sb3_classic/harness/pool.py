@@ -39,6 +39,10 @@ from sb3_classic.harness.runner import (
     store_run,
 )
 
+#: Seconds between two readings of the runs' progress reports: the bars move as the runs train (the rate of rich's
+#: display), and not only when a run ends
+POLL_SECONDS = 0.1
+
 
 class ProgressSource(Protocol):
     """A ``multiprocessing.Queue`` or a ``queue.Queue``."""
@@ -153,7 +157,12 @@ def run_pending(
     # percentage of the budget, not a count of steps
     columns = (TextColumn("{task.description}"), BarColumn(), TaskProgressColumn(), TimeElapsedColumn(), TimeRemainingColumn())
     with open_runs(workers, scheduler, console) as runs, Progress(*columns, console=console) as progress:
-        overall = progress.add_task(f"{len(specs)} runs", total=sum(spec.n_timesteps for spec in specs))
+        # Over every run's env steps (or share of its episode budget): it moves as the runs train, and its time remaining
+        # is rich's estimate from that speed. Until the first run starts training, the workers build the models
+        description = f"{len(specs)} runs"
+        overall = progress.add_task(
+            f"{description} (starting: building the models)", total=sum(spec.n_timesteps for spec in specs)
+        )
         # A run trained alone is a job of its own; the lockstep runs of a setting one job, a population
         futures: dict[Future[Any], tuple[RunSpec, ...]] = {
             (runs.submit(job[0]) if len(job) == 1 and not job[0].lockstep else runs.submit_population(job)): job
@@ -165,6 +174,8 @@ def run_pending(
         finished: set[str] = set()
 
         def show(name: str, num_timesteps: int) -> None:
+            if not tasks and not finished:
+                progress.update(overall, description=description)
             # A run started again (its Dask worker died) goes back: the overall bar with it
             completed = min(num_timesteps, by_name[name].n_timesteps)
             progress.advance(overall, completed - steps[name])
@@ -179,7 +190,7 @@ def run_pending(
         pending = set(futures)
         try:
             while pending:
-                done, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+                done, pending = wait(pending, timeout=POLL_SECONDS, return_when=FIRST_COMPLETED)
                 while True:
                     try:
                         name, num_timesteps = runs.progress.get_nowait()

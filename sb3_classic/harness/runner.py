@@ -85,6 +85,10 @@ class ProgressCallback(BaseCallback):
         self._episodes = 0
         self._last = 0
 
+    def _on_training_start(self) -> None:
+        # Its bar shows as soon as its model is built and it starts training, not at its first share of the budget
+        self.queue.put((self.name, 0))
+
     def _on_step(self) -> bool:
         if self.max_episodes is None:
             done = self.num_timesteps
