@@ -1,6 +1,7 @@
 """A study's sequential design: its boundaries, its looks, its stopping, resuming from recorded seeds, equivalence,
 seeds needed, and its error rate on synthetic data."""
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -9,7 +10,7 @@ import pytest
 from scipy import stats as scipy_stats
 
 from sb3_classic.studies import outputs, sequential, stats
-from sb3_classic.studies.spec import STATED, Claim, StudyError, load_study
+from sb3_classic.studies.spec import STATED, Claim, StudyError, StudyRun, load_study
 
 SEQUENTIAL = """
 title: Tiny sequential
@@ -236,3 +237,38 @@ def test_the_error_rate_holds_under_optional_stopping() -> None:
         naive_wrong, _, _ = error_rates.simulate(case, draw, naive, n, seed=7)
         assert wrong <= 0.05 + noise, f"{name}: {wrong:.1%} wrong verdicts"
         assert naive_wrong > wrong, f"{name}: naive {naive_wrong:.1%}, chosen {wrong:.1%}"
+
+
+def fake_runs(cache: Path, runs: Sequence[StudyRun], level: dict[str, float], spread: dict[str, float]) -> None:
+    """Cache entries of ``runs`` (as the harness writes them), 6 episodes of one return per seed, drawn per variant."""
+    for run in runs:
+        run_dir = run.spec.run_dir(cache)
+        if run_dir.exists():
+            continue
+        run_dir.mkdir(parents=True)
+        (run_dir / "run.json").write_text('{"learn_time_s": 1.0, "eval_time_s": 0.0, "training": "lockstep"}')
+        value = level[run.variant] + spread[run.variant] * np.sin(7.3 * run.seed + len(run.variant))
+        (run_dir / "episodes.csv").write_text("return\n" + "\n".join([f"{value:.3f}"] * 6) + "\n")
+
+
+def test_an_interrupted_study_resumes_look_by_look_from_its_cache_or_its_record(tmp_path: Path) -> None:
+    (tmp_path / "study.yml").write_text(SEQUENTIAL)
+    study = load_study(tmp_path / "study.yml")
+    cache, results_dir = tmp_path / "cache", tmp_path / "results"
+    level, spread = {"n1": 20.0, "n3": 400.0, "n5": 60.0}, {"n1": 3.0, "n3": 3.0, "n5": 80.0}
+    fake_runs(cache, study.runs(sequential.seeds_wanted(study, {})), level, spread)
+    first = outputs.load_study_results(study, cache)
+    assert first.recorded == 0
+    assert {run.variant for run in first.missing} == {"n1", "n5"}
+    # The next look's runs done (as the runner would), then the study read again: the second look judged
+    fake_runs(cache, first.missing, level, spread)
+    second = outputs.load_study_results(study, cache)
+    verdict = second.looks["n = 5 beats n = 1"]
+    assert verdict.looks_taken == 2 or verdict.decided
+    outputs.write_study(second, results_dir, "python -m sb3_classic.studies study.yml")
+    # Without the cache (another machine): the recorded seeds give the same verdicts and the same next look
+    again = outputs.load_study_results(study, tmp_path / "empty-cache", results_dir)
+    assert again.recorded == second.n_runs
+    assert [r.verdict for r in again.verdicts[STATED]] == [r.verdict for r in second.verdicts[STATED]]
+    assert {looked.seeds for looked in again.looks.values()} == {looked.seeds for looked in second.looks.values()}
+    assert sorted(run.spec.key() for run in again.missing) == sorted(run.spec.key() for run in second.missing)

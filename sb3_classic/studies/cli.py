@@ -25,6 +25,8 @@ from sb3_classic.studies.outputs import (
     StudyResults,
     load_study_results,
     plural,
+    recorded_seeds,
+    settings_key,
     study_command,
     training_summary,
     write_studies_index,
@@ -191,13 +193,15 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
     if args.list:
         for study in studies:
             study_runs = study.runs(sequential.seeds_planned(study))
+            recorded = recorded_seeds(study, results_dir)
             cached = sum((run.spec.run_dir(args.cache_dir) / RUN_FILE).exists() for run in study_runs)
+            counted = sum(settings_key(run.spec) in recorded for run in study_runs)
             seeds = f"{len(study.seeds)} seeds" if study.design is None else study.design.describe()
             console.print(
                 f"{study.name}: {len(study.variants)} variants × {len(study.readings)} "
                 f"{plural(len(study.readings), 'reading', 'readings')} × {seeds}, "
                 f"{study.budget.describe()}: {len(study_runs)} runs{'' if study.design is None else ' at most'}, "
-                f"{cached} cached",
+                f"{cached} cached" + (f", {counted} recorded in {study.name}-seeds.csv" if counted else ""),
                 highlight=False,
             )
         return 0

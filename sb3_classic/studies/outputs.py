@@ -237,7 +237,7 @@ def training_summary(study: StudySpec) -> str:
         together, one population of the algorithm, or one by one, with why and what would train them together; one
         phrase for the study where every variant trains alike
     """
-    runs = study.runs()
+    runs = study.runs(sequential.seeds_planned(study))
     reasons: dict[tuple[str, str], str | None] = {}
     seeds: dict[tuple[str, str], int] = {}
     for run, reason in zip(runs, training_plan([run.spec for run in runs], study.lockstep), strict=True):
@@ -245,7 +245,10 @@ def training_summary(study: StudySpec) -> str:
         seeds[(run.reading, run.variant)] = seeds.get((run.reading, run.variant), 0) + 1
     groups: dict[str, list[str]] = {}
     for (reading, variant), reason in reasons.items():
-        if reason is None:
+        if reason is None and study.design is not None:
+            # (a look's new seeds of a variant: its looks are run one after the other)
+            how = "seeds trained together, each look's new ones as one population (lockstep)"
+        elif reason is None:
             how = f"{seeds[(reading, variant)]} seeds trained together, as one population (lockstep)"
         else:
             how = f"seeds trained one by one: {reason}"
@@ -442,6 +445,10 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         "cpu_hours": results.learn_seconds / 3600,
         "run_seconds": results.run_seconds,
         "lockstep_runs": sorted(results.lockstep_runs),
+        # The runs of the study as stated (its other readings are alternatives), for STUDIES.md's compute
+        "stated_runs": sorted(
+            {row["run"] for (reading, _), rows in results.runs.items() if reading == STATED for row in rows}
+        ),
         "claims": claims,
         "claim_texts": [claim.text for claim in study.claims],
     }
@@ -541,6 +548,12 @@ resamples; each variant's seeds resampled independently):
   it excludes 0, too close to call otherwise.
 - **reaches** / **below** a level, on the metric's own scale: the interval of A's metric lies at or above the level
   (*supported* / *not supported*), below it (the opposite), or across it (too close to call).
+- **Equivalence**: a *better* comparison whose interval lies within ± the study's margin (declared in its file; default
+  5% of the env's range of returns, 25 on CartPole-v1 and Acrobot-v1) is *not supported: alike within ±m*.
+- **A sequential design** (`seeds: {{start, step, max}}`): at each look the claim is judged on each variant's first
+  n seeds with studentized bootstrap intervals (bootstrap-t) at the look's level, set by Pocock's (or O'Brien–Fleming's)
+  group-sequential boundaries so that the error rate stays 5% over all looks; the first decided look is the verdict,
+  and a claim undecided at the last look says the seeds per variant that would decide it (error-control.md).
 - A claim with fewer than 5 seeds in one of its variants is too close to call, whatever its intervals.
 - Beside the verdict, *not learned* where no compared variant's mean return over its last 100 episodes has an
   interval above that of a uniformly random policy's return on its env ({untrained.EPISODES} episodes, or those that
@@ -597,9 +610,11 @@ def write_studies_index(
     run_seconds: dict[str, float] = {}
     reduced_runs: set[str] = set()
     lockstep_runs: set[str] = set()
+    stated_runs: set[str] = set()
     for record in records.values():
         run_seconds.update(record.get("run_seconds", {}))
         lockstep_runs.update(record.get("lockstep_runs", []))
+        stated_runs.update(record.get("stated_runs", []))
         if record.get("reduced"):
             reduced_runs.update(record.get("run_seconds", {}))
     runs, hours = len(run_seconds), math.fsum(run_seconds.values()) / 3600
@@ -614,13 +629,19 @@ def write_studies_index(
         verdict = row[3].split(" (")[0]
         counts[verdict] = counts.get(verdict, 0) + 1
     tally = ", ".join(f"{count} {verdict}" for verdict, count in sorted(counts.items()))
-    planned = [run.spec.key() for study in studies for run in study.runs()]
+    planned = [run.spec.key() for study in studies for run in study.runs(sequential.seeds_planned(study))]
+    designs = sum(study.design is not None for study in studies)
+    stated = stated_runs & set(run_seconds)
     lines = [
         f"# {title}",
         "",
         f"{len(rows)} {plural(len(rows), 'claim', 'claims')}: {tally}.",
         "",
-        f"Planned, for the {len(studies)} study {plural(len(studies), 'file', 'files')} named: {len(planned)} runs, "
+        _family_note(len(rows), studies),
+        "",
+        f"Planned, for the {len(studies)} study {plural(len(studies), 'file', 'files')} named: {len(planned)} runs"
+        + (f" at most ({designs} of a sequential design run the looks their claims need)" if designs else "")
+        + ", "
         f"{len(set(planned))} distinct (runs of the same settings, in several studies or readings, share their cache "
         "entry)"
         + (
@@ -638,7 +659,13 @@ def write_studies_index(
             else ""
         )
         + "summed over the studies' results in this folder, each run once (they may come from several invocations: the "
-        "cache resumes).",
+        "cache resumes)"
+        + (
+            f"; the studies as stated, without their other readings: {len(stated)} runs, "
+            f"{math.fsum(run_seconds[key] for key in stated) / 3600:.1f} CPU hours."
+            if stated
+            else "."
+        ),
         "",
         "| Source | Claim | Measured | Verdict | Command |",
         "|---|---|---|---|---|",
@@ -667,6 +694,25 @@ def settings_yaml(settings: dict[str, Any]) -> str:
     return yaml.dump(settings, Dumper=_SettingsDumper, sort_keys=False).rstrip()
 
 
+def _family_note(n_claims: int, studies: Sequence[StudySpec]) -> str:
+    """:return: STUDIES.md's line on the error rate per claim and what it means for all of them together"""
+    alpha = 1 - stats.CONFIDENCE
+    sequential_ones = sum(study.design is not None for study in studies)
+    how = "95% intervals" + (
+        f"; the {sequential_ones} {plural(sequential_ones, 'study', 'studies')} of a sequential design, wider ones at "
+        "each look, however early a claim stops"
+        if sequential_ones
+        else ""
+    )
+    return (
+        f"Error rate: each claim says *supported* or *reversed* where there is no difference at most {alpha:.0%} of the "
+        f"time ({how}). Over {n_claims} {plural(n_claims, 'claim', 'claims')}, that is at most "
+        f"{alpha * n_claims:.1f} wrong verdicts expected if none had a difference, and fewer as some do: no correction "
+        "is made across claims, each is its own question. A *too close to call* is not a verdict, and *alike* is "
+        "wrong at most 2.5% of the time where the difference is the margin."
+    )
+
+
 def _seeds_line(study: StudySpec) -> str:
     """:return: the seeds per variant of the study's page: ``10 seeds per variant`` or its design's looks"""
     if study.design is None:
@@ -688,7 +734,7 @@ def _design_notes(results: StudyResults) -> list[str]:
     study, notes = results.study, []
     if study.design is not None:
         notes.append(
-            f"- Sequential design: {study.design.describe()}; Welch's t-intervals (Student's for a level); a claim "
+            f"- Sequential design: {study.design.describe()}; studentized bootstrap intervals (bootstrap-t); a claim "
             f"decided at a look keeps its verdict and draws no more seeds; {study.design.alpha:.0%} wrong verdicts per "
             "claim when there is no difference, however early it stops (error-control.md)."
         )

@@ -18,10 +18,11 @@ difference. ``boundaries`` solves for them with SciPy's multivariate normal dist
 - ``obrien-fleming``: b_k = c √(n_max / n_k), strict early and near 1.96 at the last (O'Brien & Fleming 1979,
   *Biometrics* 35(3)); 4.049, 2.863, 2.337, 2.024 for 4 looks.
 
-Each look's verdict is then the fixed rule (``stats.judge``) at the confidence 1 − 2 Φ(−b_k), with t-intervals (Welch's
-for a difference): ``benchmarks/results/studies/error-control.md`` measures the rate of wrong verdicts of this design
-on synthetic per-seed data, beside the naive repeated 95% interval's. Written here by hand: the boundaries' equation
-(SciPy computes the normal probabilities) and the seeds-needed formula; no library of the ecosystem plans looks.
+Each look's verdict is then the fixed rule (``stats.judge``) at the confidence 1 − 2 Φ(−b_k), with studentized
+bootstrap intervals (``stats.INTERVAL_METHODS``): ``benchmarks/results/studies/error-control.md`` measures the rate of
+wrong verdicts of this design on synthetic per-seed data, beside the naive repeated 95% interval's. Written here by
+hand: the boundaries' equation (SciPy computes the normal probabilities) and the seeds-needed formula; no library of
+the ecosystem plans looks.
 """
 
 from collections.abc import Mapping, Sequence
@@ -46,8 +47,6 @@ ALPHA = 0.05
 POWER = 0.8
 #: Seeds per variant beyond which ``seeds_needed`` calls a verdict out of practical reach
 PRACTICAL_SEEDS = 200
-#: The intervals of a sequential design's looks (``stats.INTERVAL_METHODS``)
-METHOD = "t"
 
 
 @cache
@@ -97,6 +96,8 @@ class SequentialDesign:
     :param max: the most seeds per variant (the last look)
     :param boundary: the shape of the looks' boundaries (``BOUNDARIES``)
     :param alpha: the error rate per claim, over all its looks
+    :param method: the looks' intervals (``stats.INTERVAL_METHODS``: the bootstrap-t, which holds α at these seed counts,
+        ``benchmarks/results/studies/error-control.md``)
     """
 
     start: int
@@ -104,6 +105,7 @@ class SequentialDesign:
     max: int
     boundary: str = "pocock"
     alpha: float = ALPHA
+    method: str = "bootstrap-t"
 
     @property
     def looks(self) -> tuple[int, ...]:
@@ -176,7 +178,7 @@ def judge_sequentially(
         if found < n:
             break
         first = {name: {key: values[:n] for key, values in metrics[name].items()} for name in (claim.variant, *claim.others)}
-        result = stats.judge(claim, first, confidence, METHOD, margin)
+        result = stats.judge(claim, first, confidence, design.method, margin)
         last = index == len(design.looks) - 1
         if stats.is_decided(result.verdict) or last:
             needed = "" if stats.is_decided(result.verdict) else seeds_needed(claim, first, design, margin)
