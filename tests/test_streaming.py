@@ -1,25 +1,28 @@
 """
 The streaming recipe: ObGD's step against its formula, SARSA(λ) along its traces against a tabular transcription of the
-book's, sparse initialisation, LayerNorm without parameters, the argument checks, and save/load of the traces.
+book's, REINFORCE's bounded per-step updates against theirs, sparse initialisation, LayerNorm without parameters, the
+argument checks, and save/load of the traces.
 """
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import pytest
 import torch as th
+import yaml
 from chain_env import ShortChain
 from recorders import RecordLocal
 from stable_baselines3.common.utils import set_random_seed
 from stable_baselines3.common.vec_env import DummyVecEnv
 from torch import nn
 
-from sb3_classic import NStepSARSA
+from sb3_classic import REINFORCE, NStepSARSA
 from sb3_classic.common.obgd import ObGD, td_step
 from sb3_classic.common.torch_layers import sparse_init
 from sb3_classic.envs import RandomWalkEnv
+from sb3_classic.zoo import YAML_NAMES
 
 GAMMA, LAMBDA = 0.9, 0.8
 
@@ -226,3 +229,172 @@ def test_save_load_keeps_the_traces(tmp_path: Path) -> None:
         continued.learn(300)
     for a, b in zip(model.policy.parameters(), loaded.policy.parameters(), strict=True):
         assert th.equal(a, b)
+
+
+def reinforce_streaming_model(env: Any, **kwargs: Any) -> REINFORCE:
+    policy_kwargs = dict(
+        net_arch=[32, 32],
+        activation_fn=nn.LeakyReLU,
+        layer_norm=True,
+        layer_norm_kwargs=dict(elementwise_affine=False),
+        weight_init="sparse",
+        optimizer_class=ObGD,
+    )
+    policy_kwargs.update(kwargs.pop("policy_kwargs", {}))
+    settings: dict[str, Any] = dict(learning_rate=1.0, value_learning_rate=1.0, update_mode="per_step", gamma_t_factor=True)
+    settings.update(kwargs)
+    return REINFORCE("MlpPolicy", env, policy_kwargs=policy_kwargs, seed=0, device="cpu", **settings)
+
+
+@pytest.mark.parametrize(
+    ("learning_rate", "use_baseline", "episode_step", "bounded"),
+    [(0.02, True, 3, False), (1.0, True, 3, True), (1.0, False, 0, True), (0.02, False, 5, False)],
+    ids=["M<=1", "M>1", "M>1-plain", "M<=1-plain"],
+)
+def test_reinforce_obgd_step_is_its_formula(
+    learning_rate: float, use_baseline: bool, episode_step: int, bounded: bool
+) -> None:
+    # Linear networks, so that the gradients are by hand: v̂(s) = w·x + b, h(s, ·) = Θx + c, π = soft-max(h)
+    model = REINFORCE(
+        "MlpPolicy",
+        "CartPole-v1",
+        learning_rate=learning_rate,
+        value_learning_rate=learning_rate,
+        update_mode="per_step",
+        gamma=GAMMA,
+        gamma_t_factor=True,
+        use_baseline=use_baseline,
+        policy_kwargs=dict(net_arch=[], optimizer_class=ObGD),
+        seed=0,
+        device="cpu",
+    )
+    w, b = np.array([0.3, -0.2, 0.1, 0.4]), 0.5
+    theta, c = np.array([[0.2, -0.1, 0.3, 0.0], [-0.3, 0.2, 0.1, 0.5]]), np.array([0.1, -0.2])
+    action_net, value_net = cast(nn.Linear, model.policy.action_net), cast(nn.Linear, model.policy.value_net)
+    with th.no_grad():
+        action_net.weight.copy_(th.tensor(theta))
+        action_net.bias.copy_(th.tensor(c))
+        if use_baseline:
+            value_net.weight.copy_(th.tensor(w[None]))
+            value_net.bias.copy_(th.tensor([b]))
+    x, action, ret = np.array([0.5, -1.0, 2.0, 0.25]), 1, 2.5
+    model._gradient_step(x[None].astype(np.float32), np.array([action]), np.array([ret], np.float32), np.array([episode_step]))
+
+    # δ = G − v̂(S); w ← w + (α / max(M, 1)) δ ∇v̂, M = ακ^w max(|δ|, 1) ‖∇v̂‖₁, κ^w = 2
+    v = w @ x + b if use_baseline else 0.0
+    delta = ret - v
+    grad_v = np.append(x, 1.0)
+    bound_v = learning_rate * 2.0 * max(abs(delta), 1.0) * np.abs(grad_v).sum()
+    step_v = learning_rate / max(bound_v, 1.0)
+    # θ ← θ + (α / max(M, 1)) γ^t δ ∇ln π(A|S), M = ακ^θ max(|γ^t δ|, 1) ‖∇ln π‖₁, κ^θ = 3 (S&B §13.4, eq. 13.11)
+    h = theta @ x + c
+    pi = np.exp(h - h.max()) / np.exp(h - h.max()).sum()
+    grad_h = np.eye(2)[action] - pi  # ∇_h ln π(A|S) of the soft-max (S&B eq. 13.2)
+    grad_theta, grad_c = np.outer(grad_h, x), grad_h
+    weight = GAMMA**episode_step * delta
+    bound_pi = learning_rate * 3.0 * max(abs(weight), 1.0) * (np.abs(grad_theta).sum() + np.abs(grad_c).sum())
+    step_pi = learning_rate / max(bound_pi, 1.0)
+    assert (bound_pi > 1.0) == bounded
+    np.testing.assert_allclose(action_net.weight.detach().numpy(), theta + step_pi * weight * grad_theta, rtol=1e-5)
+    np.testing.assert_allclose(action_net.bias.detach().numpy(), c + step_pi * weight * grad_c, rtol=1e-5)
+    if use_baseline:
+        assert (bound_v > 1.0) == bounded
+        new_w = np.append(w, b) + step_v * delta * grad_v
+        np.testing.assert_allclose(value_net.weight.detach().numpy()[0], new_w[:4], rtol=1e-5)
+        np.testing.assert_allclose(value_net.bias.detach().numpy(), new_w[4:], rtol=1e-5)
+
+
+def test_reinforce_streaming_networks() -> None:
+    model = reinforce_streaming_model("CartPole-v1", policy_kwargs=dict(value_optimizer_kwargs=dict(kappa=1.5)))
+    policy = model.policy
+    networks = [cast(nn.Sequential, network) for network in (policy.mlp_extractor.policy_net, policy.mlp_extractor.value_net)]
+    for network in networks:
+        norms = [layer for layer in network if isinstance(layer, nn.LayerNorm)]
+        assert len(norms) == 2
+        assert all(norm.weight is None and norm.bias is None for norm in norms)
+        # Linear, LayerNorm, activation
+        assert [type(layer) for layer in list(network)[:3]] == [nn.Linear, nn.LayerNorm, nn.LeakyReLU]
+    for layer in (networks[1][3], policy.action_net, policy.value_net):
+        assert isinstance(layer, nn.Linear)
+        zeros = (layer.weight == 0).sum(dim=1)
+        assert th.equal(zeros, th.full_like(zeros, math.floor(0.9 * layer.in_features)))
+    # κ: the paper's 3 for the policy (an actor), value_optimizer_kwargs' for v̂ (ObGD's own default: 2)
+    assert policy.optimizer.param_groups[0]["kappa"] == 3.0
+    assert policy.value_optimizer is not None
+    assert policy.value_optimizer.param_groups[0]["kappa"] == 1.5
+    value_optimizer = reinforce_streaming_model("CartPole-v1").policy.value_optimizer
+    assert value_optimizer is not None
+    assert value_optimizer.param_groups[0]["kappa"] == 2.0
+    with pytest.raises(ValueError, match="pass layer_norm=True as well"):
+        REINFORCE("MlpPolicy", "CartPole-v1", policy_kwargs=dict(layer_norm_kwargs=dict(elementwise_affine=False)))
+    with pytest.raises(ValueError, match=r"layer_norm=True normalises the networks' hidden layers, and net_arch=\[\]"):
+        REINFORCE("MlpPolicy", "CartPole-v1", policy_kwargs=dict(net_arch=[], layer_norm=True))
+    # Without the options, the networks are as before: LayerNorm is not built
+    plain = REINFORCE("MlpPolicy", "CartPole-v1", seed=0)
+    assert not any(isinstance(layer, nn.LayerNorm) for layer in plain.policy.modules())
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        (dict(update_mode="batch"), "update_mode='batch' with optimizer_class=ObGD.*pass update_mode='per_step'"),
+        (dict(ent_coef=0.01), "ent_coef=0.01 with optimizer_class=ObGD.*drop ent_coef"),
+        (dict(max_grad_norm=0.5), "max_grad_norm=0.5 with optimizer_class=ObGD.*drop max_grad_norm"),
+        (
+            dict(policy_kwargs=dict(share_features_extractor=True)),
+            r"policy_kwargs\['share_features_extractor'\]=True with optimizer_class=ObGD.*drop share_features_extractor",
+        ),
+    ],
+)
+def test_reinforce_settings_obgd_cannot_train_are_refused(kwargs: dict[str, Any], match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        reinforce_streaming_model("CartPole-v1", **kwargs)
+
+
+def test_reinforce_streaming_trains_on_several_envs() -> None:
+    # λ = 0: no trace joins one step's update to the next, so the envs' steps may interleave
+    model = reinforce_streaming_model(DummyVecEnv([lambda: ShortChain(4)] * 2), n_episodes=2)
+    model.learn(200)
+    assert model._n_updates > 0
+    assert all(th.isfinite(p).all() for p in model.policy.parameters())
+
+
+def test_reinforce_streaming_save_load_continues_as_the_original(tmp_path: Path) -> None:
+    def env() -> DummyVecEnv:
+        vec_env = DummyVecEnv([lambda: ShortChain(6)])
+        vec_env.seed(5)
+        return vec_env
+
+    model = reinforce_streaming_model(env())
+    model.learn(300)
+    model.save(tmp_path / "model.zip")
+    loaded = REINFORCE.load(tmp_path / "model.zip", env=env(), device="cpu")
+    assert isinstance(loaded.policy.optimizer, ObGD)
+    assert loaded.policy.optimizer.param_groups[0]["kappa"] == 3.0
+    assert loaded.policy.value_optimizer is not None
+    assert loaded.policy.value_optimizer.param_groups[0]["kappa"] == 2.0
+    assert loaded.policy.layer_norm
+    assert loaded.policy.weight_init == "sparse"
+    # The loaded model continues as the original does, to the bit (new episodes of envs seeded alike, the same draws)
+    model.set_env(env())
+    for continued in (model, loaded):
+        set_random_seed(7)
+        continued.learn(300)
+    for a, b in zip(model.policy.parameters(), loaded.policy.parameters(), strict=True):
+        assert th.equal(a, b)
+
+
+@pytest.mark.parametrize(
+    ("algorithm", "yaml_name"), [(REINFORCE, "reinforce_streaming.yml"), (NStepSARSA, "nstep_sarsa_streaming.yml")]
+)
+def test_streaming_yaml_entries_build(algorithm: type[REINFORCE] | type[NStepSARSA], yaml_name: str) -> None:
+    # Each entry as rl-zoo3 reads it: the zoo's own keys consumed, policy_kwargs evaluated with the YAML names in scope
+    entries = yaml.safe_load((Path(__file__).resolve().parent.parent / "hyperparams" / yaml_name).read_text())
+    assert {"CartPole-v1", "Acrobot-v1"} <= set(entries)
+    for env_id, entry in entries.items():
+        assert entry["normalize"], f"{yaml_name}, {env_id}: the recipe normalises observations and rewards"
+        assert "gamma" in entry, f"{yaml_name}, {env_id}: VecNormalize's γ is the entry's gamma (the zoo passes it)"
+        kwargs = {key: value for key, value in entry.items() if key not in ("n_timesteps", "n_envs", "normalize")}
+        kwargs["policy_kwargs"] = eval(kwargs["policy_kwargs"], {"nn": nn, "th": th, **YAML_NAMES})
+        model = algorithm(env=env_id, device="cpu", **kwargs)
+        assert isinstance(model.policy.optimizer, ObGD), f"{yaml_name}, {env_id}"

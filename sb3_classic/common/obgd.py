@@ -5,14 +5,16 @@ TD(λ) step it makes (Sutton & Barto, Reinforcement Learning: An Introduction, 2
 """
 
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 import numpy as np
 import torch as th
 
-#: ``ObGD``'s κ for a value learner (q̂, v̂), the paper's; an actor's is 3
+#: ``ObGD``'s κ for a value learner (q̂, v̂), the paper's; an actor's is ``ACTOR_KAPPA``
 DEFAULT_KAPPA = 2.0
+#: ``ObGD``'s κ for an actor (a policy network), the paper's
+ACTOR_KAPPA = 3.0
 
 
 class ObGD(th.optim.Optimizer):
@@ -156,3 +158,32 @@ def td_step(
     # e ← γλe + ∇q̂ (e ← ∇q̂ at an episode's start); w ← w + (bounded step) δ e
     optimizer.step(td_error=td_error, trace_decay=0.0 if restart else trace_decay)
     return prediction.detach().cpu().numpy(), 0.5 * td_error * td_error
+
+
+def uses_obgd(policy_kwargs: dict[str, Any] | None) -> bool:
+    """
+    :param policy_kwargs: a model's ``policy_kwargs``
+    :return: whether they choose ``ObGD`` (or a subclass of it) as ``optimizer_class``
+    """
+    optimizer_class = (policy_kwargs or {}).get("optimizer_class")
+    return isinstance(optimizer_class, type) and issubclass(optimizer_class, ObGD)
+
+
+def check_obgd_settings(why: str, required: Sequence[tuple[str, Any, Any, str]], max_grad_norm: float | None) -> None:
+    """
+    The check an algorithm makes of its settings where ``policy_kwargs`` choose ``ObGD``: each setting ObGD's step
+    needs, and no gradient clipping (ObGD bounds its own step).
+
+    :param why: what ObGD's step is in the algorithm, for the messages
+    :param required: (argument, its value, the value ObGD needs, the fix) for each setting
+    :param max_grad_norm: ``max_grad_norm`` (``math.inf`` or None: no clipping)
+    :raises ValueError: naming the first setting ObGD cannot train with, and the fix
+    """
+    for name, value, needed, fix in required:
+        if value != needed:
+            raise ValueError(f"{name}={value!r} with optimizer_class=ObGD: {why}; {fix}, or use another optimizer")
+    if max_grad_norm is not None and math.isfinite(max_grad_norm):
+        raise ValueError(
+            f"max_grad_norm={max_grad_norm!r} with optimizer_class=ObGD: {why}, and bounds its own step (M = ακδ̄‖e‖₁); "
+            "drop max_grad_norm, or use another optimizer"
+        )

@@ -13,8 +13,10 @@ from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from torch import nn
 
 from sb3_classic.common.masking import mask_segments
+from sb3_classic.common.obgd import ACTOR_KAPPA, ObGD
 from sb3_classic.common.policies import EnvActionsMixin
 from sb3_classic.common.torch_layers import (
+    WEIGHT_INITS_WITH_SPARSE,
     check_constant_init_is_linear,
     check_net_arch,
     check_weight_init,
@@ -24,6 +26,7 @@ from sb3_classic.common.torch_layers import (
     make_activation,
     optimizer_kwargs_with_defaults,
     remove_biases,
+    sparse_init,
 )
 from sb3_classic.common.utils import check_bool
 
@@ -54,11 +57,17 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
     :param activation_fn: activation class of the hidden layers
     :param activation_kwargs: arguments of ``activation_fn``, e.g. ``dict(negative_slope=0.1)`` for ``nn.LeakyReLU``
     :param weight_init: ``"orthogonal"`` (SB3's A2C/PPO scheme), ``"kaiming"`` (He initialisation of the hidden
-        layers; output layers keep PyTorch's default), ``"default"`` (PyTorch's default everywhere), or a number:
+        layers; output layers keep PyTorch's default), ``"default"`` (PyTorch's default everywhere), ``"sparse"``
+        (every linear layer of both networks, output layers too: 90% of each unit's incoming weights 0, the rest
+        LeCun-uniform, biases 0; ``sparse_init``, the streaming recipe of Elsayed, Vasan & Mahmood 2024), or a number:
         every weight starts at that constant and every bias at 0 (the book's linear methods start at 0)
     :param with_bias: whether the linear layers have a bias (SB3's ``create_mlp`` name). The book's linear policy
         :math:`h(s, a, \boldsymbol\theta) = \boldsymbol\theta^\top \mathbf x(s, a)` (S&B eq. 13.3) and baseline
         :math:`\hat v(s, \mathbf w) = \mathbf w^\top \mathbf x(s)` are ``net_arch=[], with_bias=False``
+    :param layer_norm: LayerNorm after every hidden linear layer of both networks, before its activation (the
+        streaming recipe's, which keeps the features' scale from drifting under per-step updates)
+    :param layer_norm_kwargs: arguments of ``nn.LayerNorm`` (``layer_norm=True`` only), e.g.
+        ``dict(elementwise_affine=False)``: LayerNorm without learnable gain and bias, the streaming recipe's
     :param use_baseline: build the value network :math:`\hat v(s, \mathbf w)` and its optimizer (REINFORCE with
         baseline, §13.4); False builds none (plain REINFORCE, §13.3)
     :param log_std_init: initial log standard deviation of Gaussian actions (Box action spaces)
@@ -67,10 +76,15 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
     :param share_features_extractor: share one features extractor between the two networks (its parameters are then
         trained by the policy optimizer, on the gradient of both losses)
     :param normalize_images: whether to divide images by 255
-    :param optimizer_class: optimizer of both networks, ``th.optim.Adam`` by default
+    :param optimizer_class: optimizer of both networks, ``th.optim.Adam`` by default; ``ObGD`` with
+        ``update_mode="per_step"`` for the streaming recipe's bounded steps (``REINFORCE``'s per-step mode). ObGD's κ is
+        then the paper's for each network unless the kwargs give one: 3 for the policy (an actor), 2 for v̂
     :param optimizer_kwargs: additional keyword arguments, excluding the learning rate, to pass to both optimizers
         (Adam and AdamW get ``fused=True``, PyTorch's one-kernel implementation of the same update, unless these
         choose ``fused`` or ``foreach``)
+    :param value_optimizer_kwargs: keyword arguments of the value network's optimizer that replace those of
+        ``optimizer_kwargs`` for it, e.g. ``dict(kappa=2.0)`` for ObGD's κ of v̂; None: ``optimizer_kwargs`` alone
+    :raises ValueError: for ``layer_norm`` without hidden layers, or ``layer_norm_kwargs`` without ``layer_norm``
     """
 
     def __init__(
@@ -84,6 +98,8 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         activation_kwargs: dict[str, Any] | None = None,
         weight_init: str | float = "orthogonal",
         with_bias: bool = True,
+        layer_norm: bool = False,
+        layer_norm_kwargs: dict[str, Any] | None = None,
         use_baseline: bool = True,
         log_std_init: float = 0.0,
         features_extractor_class: type[BaseFeaturesExtractor] = FlattenExtractor,
@@ -92,19 +108,30 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         normalize_images: bool = True,
         optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
         optimizer_kwargs: dict[str, Any] | None = None,
+        value_optimizer_kwargs: dict[str, Any] | None = None,
     ):
-        check_weight_init(weight_init)
+        check_weight_init(weight_init, WEIGHT_INITS_WITH_SPARSE)
         # SB3's form before 1.8, [dict(pi=..., vf=...)]: ActorCriticPolicy converts it with its deprecation warning, as
         # for A2C and PPO (a list with shared layers before the dict, which it cannot convert, is refused)
         legacy = isinstance(net_arch, list) and len(net_arch) == 1 and isinstance(net_arch[0], dict)
         check_net_arch(net_arch[0] if legacy else net_arch, keys=("pi", "vf"))  # type: ignore[index]
         check_bool("with_bias", with_bias)
+        check_bool("layer_norm", layer_norm)
+        if layer_norm_kwargs is not None and not layer_norm:
+            raise ValueError(
+                f"layer_norm_kwargs={layer_norm_kwargs!r} are the arguments of the networks' LayerNorm, and layer_norm is "
+                "False (no LayerNorm): pass layer_norm=True as well, or drop layer_norm_kwargs"
+            )
         check_bool("use_baseline", use_baseline)
         # SB3's ActorCriticPolicy takes their truth: share_features_extractor="False" would share it
         check_bool("share_features_extractor", share_features_extractor)
         check_bool("normalize_images", normalize_images)
         # (checked before ActorCriticPolicy builds an optimizer of its own with them)
         optimizer_kwargs_with_defaults(optimizer_class, optimizer_kwargs)
+        optimizer_kwargs_with_defaults(optimizer_class, value_optimizer_kwargs)
+        # (read by _build_mlp_extractor, which ActorCriticPolicy's constructor calls)
+        self.layer_norm = layer_norm
+        self.layer_norm_kwargs = layer_norm_kwargs
         super().__init__(
             observation_space,
             action_space,
@@ -162,6 +189,8 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
         elif weight_init == "kaiming":
             hidden = {self.mlp_extractor, *filter(is_library_extractor, extractors)}
             kaiming_init(hidden, activation_fn, activation_kwargs)
+        elif weight_init == "sparse":
+            sparse_init(built)
 
         # Two optimizers instead of ActorCriticPolicy's one: α^θ for the policy network, α^w for the value network
         value_modules = [self.mlp_extractor.value_net, self.value_net]
@@ -176,10 +205,34 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
             # SB3's ActorCriticPolicy gives Adam eps=1e-5 (A2C's and PPO's) only where optimizer_kwargs is None: choosing
             # the implementation (fused, foreach) would otherwise change the update too (eps=1e-8)
             optimizer_kwargs.setdefault("eps", 1e-5)
+        self.value_optimizer_kwargs = value_optimizer_kwargs
+        value_kwargs = {**optimizer_kwargs, **(value_optimizer_kwargs or {})}
+        if issubclass(self.optimizer_class, ObGD):
+            # The paper's κ of an actor for the policy (ObGD's own default, 2, is a value learner's)
+            optimizer_kwargs.setdefault("kappa", ACTOR_KAPPA)
         self.optimizer = self.optimizer_class(policy_parameters, lr=lr_schedule(1), **optimizer_kwargs)  # type: ignore[call-arg]
         self.value_optimizer: th.optim.Optimizer | None = None
         if use_baseline:
-            self.value_optimizer = self.optimizer_class(value_parameters, lr=value_lr_schedule(1), **optimizer_kwargs)  # type: ignore[call-arg]
+            self.value_optimizer = self.optimizer_class(value_parameters, lr=value_lr_schedule(1), **value_kwargs)  # type: ignore[call-arg]
+
+    def _build_mlp_extractor(self) -> None:
+        """SB3's ``MlpExtractor``, with ``layer_norm`` a LayerNorm after each of its linear layers (its hidden layers)."""
+        super()._build_mlp_extractor()
+        if self.layer_norm:
+            if not any(isinstance(layer, nn.Linear) for layer in self.mlp_extractor.modules()):
+                raise ValueError(
+                    f"layer_norm=True normalises the networks' hidden layers, and net_arch={self.net_arch!r} has none (both "
+                    "networks are linear in the features): give hidden layers (e.g. net_arch=[64, 64]) or drop layer_norm"
+                )
+            kwargs = self.layer_norm_kwargs or {}
+            for part in ("policy_net", "value_net"):
+                # Linear, LayerNorm, activation: the same Linear modules (and weights) as without LayerNorm
+                layers = getattr(self.mlp_extractor, part)
+                normed = [
+                    [layer, nn.LayerNorm(layer.out_features, **kwargs)] if isinstance(layer, nn.Linear) else [layer]
+                    for layer in layers
+                ]
+                setattr(self.mlp_extractor, part, nn.Sequential(*(module for group in normed for module in group)))
 
     def _check_value_network(self, method: str) -> None:
         """:raises ValueError: for plain REINFORCE (``use_baseline=False``), which has no v̂ for ``method`` to return"""
@@ -366,7 +419,10 @@ class REINFORCEPolicy(EnvActionsMixin, ActorCriticPolicy):
             activation_kwargs=self.activation_kwargs,
             weight_init=self.weight_init,
             with_bias=self.with_bias,
+            layer_norm=self.layer_norm,
+            layer_norm_kwargs=self.layer_norm_kwargs,
             use_baseline=self.use_baseline,
+            value_optimizer_kwargs=self.value_optimizer_kwargs,
             share_features_extractor=self.share_features_extractor,
         )
         return data

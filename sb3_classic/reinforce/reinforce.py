@@ -10,10 +10,12 @@ from stable_baselines3.common.utils import FloatSchedule, explained_variance, ob
 
 from sb3_classic.common.arguments import LOADING
 from sb3_classic.common.buffers import TrainingBatch, select
+from sb3_classic.common.obgd import ObGD
 from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm, Update, run_update
 from sb3_classic.common.returns import discounted_returns
 from sb3_classic.common.utils import check_bool, check_choice, check_learning_rate, check_positive_int, check_range
 from sb3_classic.reinforce.policies import CnnPolicy, MlpPolicy, MultiInputPolicy, REINFORCEPolicy
+from sb3_classic.reinforce.streaming import check_streaming_settings, reinforce_obgd_step
 
 SelfREINFORCE = TypeVar("SelfREINFORCE", bound="REINFORCE")
 
@@ -160,7 +162,10 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
       current :math:`\mathbf w`, the value update with :math:`\alpha^{\mathbf w}`, then the policy update with
       :math:`\alpha^{\boldsymbol\theta}`, each with the full step size. With plain SGD
       (``policy_kwargs=dict(optimizer_class=th.optim.SGD)``), one env, ``n_episodes=1`` and ``gamma_t_factor=True``
-      (the box's :math:`\gamma^t`; or γ = 1) it is the book's algorithm to the last bit.
+      (the box's :math:`\gamma^t`; or γ = 1) it is the book's algorithm to the last bit. With
+      ``policy_kwargs=dict(optimizer_class=ObGD)`` each update is bounded as in the streaming recipe (Elsayed, Vasan &
+      Mahmood 2024, arXiv 2410.14606): a network's step cut to α/M where M = ακ·max(|δ|, 1)·‖∇‖₁ > 1, κ = 3 for the
+      policy and 2 for v̂ (``reinforce_obgd_step``), with ``weight_init="sparse"`` and ``layer_norm`` as its networks.
 
     Why batch by default: the settings of ``hyperparams/reinforce.yml`` (Adam, the seed report's learning rates)
     were found and benchmarked with it; the per-step mode makes T optimizer steps per episode instead of one
@@ -315,6 +320,7 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
                 "time: pass update_mode='batch', or normalize_advantage=False"
             )
         check_range("ent_coef", self.ent_coef, 0.0, float("inf"), hint="0.0 disables the entropy bonus")
+        check_streaming_settings(self.policy_kwargs, self.update_mode, self.ent_coef, self.max_grad_norm)
 
     def _make_policy(self) -> BasePolicy:
         self._refuse_policy_kwargs_set_here(use_baseline="use_baseline", value_lr_schedule="value_learning_rate")
@@ -452,6 +458,10 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
             log_prob, entropy = distribution.log_prob(actions_t), distribution.entropy()
             values = th.zeros_like(returns_t)
         assert entropy is not None, "the action distributions REINFORCE supports have an entropy"
+        if isinstance(self.policy.optimizer, ObGD):  # the same updates, each bounded by ObGD (the streaming recipe)
+            return reinforce_obgd_step(
+                self.policy, log_prob, entropy, values, returns_t, episode_steps, self.gamma, self.gamma_t_factor
+            )
 
         # (a model alone is a member axis of one)
         losses = reinforce_losses(

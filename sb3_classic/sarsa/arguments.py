@@ -6,7 +6,7 @@ from functools import partial
 from typing import Any
 
 from sb3_classic.common.arguments import ArgumentRule, optional
-from sb3_classic.common.obgd import ObGD
+from sb3_classic.common.obgd import check_obgd_settings, uses_obgd
 from sb3_classic.common.utils import check_bool, check_choice, check_positive_int, check_range
 from sb3_classic.sarsa.policies import LinearQPolicy
 
@@ -153,23 +153,16 @@ def check_trace_settings(
     :param max_grad_norm: ``max_grad_norm`` (``math.inf`` or None: no clipping)
     :raises ValueError: for a setting the update along traces cannot make, naming it and the fix
     """
-    optimizer_class = (policy_kwargs or {}).get("optimizer_class")
-    if not (isinstance(optimizer_class, type) and issubclass(optimizer_class, ObGD)):
+    if not uses_obgd(policy_kwargs):
         return
     why = "ObGD makes SARSA(λ)'s update along eligibility traces (S&B §12.7), one transition at a time"
-    for name, value, needed, fix in (
+    required = (
         ("update_mode", update_mode, "per_step", "pass update_mode='per_step' (each transition's own update, in time order)"),
         ("n_steps", n_steps, 1, "pass n_steps=1: δ is the one-step TD error, and td_lambda is the traces' λ"),
         ("gradient_steps", gradient_steps, 1, "pass gradient_steps=1: a second pass would decay the traces twice"),
         ("loss_function", loss_function, "mse", "drop loss_function: ObGD's bound on δ̄ = max(|δ|, 1) is its own clipping"),
-    ):
-        if value != needed:
-            raise ValueError(f"{name}={value!r} with optimizer_class=ObGD: {why}; {fix}, or use another optimizer")
-    if max_grad_norm is not None and math.isfinite(max_grad_norm):
-        raise ValueError(
-            f"max_grad_norm={max_grad_norm!r} with optimizer_class=ObGD: {why}, and bounds its own step (M = ακδ̄‖e‖₁); "
-            "drop max_grad_norm, or use another optimizer"
-        )
+    )
+    check_obgd_settings(why, required, max_grad_norm)
     if n_envs is not None and n_envs != 1:
         raise ValueError(
             f"{n_envs} envs with optimizer_class=ObGD: {why}, with one trace over one stream of time steps; train on one "
