@@ -164,8 +164,9 @@ class REINFORCE(ClassicOnPolicyAlgorithm):
       (``policy_kwargs=dict(optimizer_class=th.optim.SGD)``), one env, ``n_episodes=1`` and ``gamma_t_factor=True``
       (the box's :math:`\gamma^t`; or γ = 1) it is the book's algorithm to the last bit. With
       ``policy_kwargs=dict(optimizer_class=ObGD)`` each update is bounded as in the streaming recipe (Elsayed, Vasan &
-      Mahmood 2024, arXiv 2410.14606): a network's step cut to α/M where M = ακ·max(|δ|, 1)·‖∇‖₁ > 1, κ = 3 for the
-      policy and 2 for v̂ (``reinforce_obgd_step``), with ``weight_init="sparse"`` and ``layer_norm`` as its networks.
+      Mahmood 2024, arXiv 2410.14606): a network's step cut to α/M where :math:`M = \alpha\kappa \max(|\delta|, 1)
+      \lVert \nabla \rVert_1 > 1`, κ = 3 for the policy and 2 for v̂ (``reinforce_obgd_step``), with
+      ``weight_init="sparse"`` and ``layer_norm`` as its networks.
 
     Why batch by default: the settings of ``hyperparams/reinforce.yml`` (Adam, the seed report's learning rates)
     were found and benchmarked with it; the per-step mode makes T optimizer steps per episode instead of one
