@@ -1,6 +1,7 @@
 """A study's sequential design: its boundaries, its looks, its stopping, resuming from recorded seeds, equivalence,
 seeds needed, and its error rate on synthetic data."""
 
+import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -166,7 +167,7 @@ def test_a_study_resumes_from_its_recorded_seeds(tmp_path: Path) -> None:
                 "episodes_to_threshold": 6.0,
                 "reached": False,
                 "run": f"key{run.seed}{run.variant}",
-                "settings": outputs.settings_key(run.spec),
+                "settings": outputs.settings_key(run.spec, study),
                 "cpu_seconds": 2.0,
                 "lockstep": True,
             }
@@ -272,3 +273,41 @@ def test_an_interrupted_study_resumes_look_by_look_from_its_cache_or_its_record(
     assert [r.verdict for r in again.verdicts[STATED]] == [r.verdict for r in second.verdicts[STATED]]
     assert {looked.seeds for looked in again.looks.values()} == {looked.seeds for looked in second.looks.values()}
     assert sorted(run.spec.key() for run in again.missing) == sorted(run.spec.key() for run in second.missing)
+
+
+def test_seeds_at_one_value_give_a_finite_interval_within_the_envs_returns() -> None:
+    # Eight seeds of ten solved at 500: resamples of only 500s have no spread, and the interval stayed open below
+    solved = np.array([500.0] * 8 + [300.0, 400.0])
+    value = stats.interval(solved, confidence=0.978, method="bootstrap-t")
+    assert np.isfinite(value.low)
+    assert value.low < 470 < value.high
+    # Every seed at −500: n seeds at one value bound the share elsewhere by 1 − tail^(1/n) (Clopper–Pearson)
+    failed = np.full(10, -500.0)
+    share = 1 - 0.011 ** (1 / 10)
+    value = stats.interval(failed, confidence=0.978, method="bootstrap-t", bounds=(-500.0, 0.0))
+    assert value.low == -500.0
+    assert value.high == pytest.approx(-500.0 + share * 500.0)
+    level = Claim("reaches", "reaches", "A", value=-100.0)
+    assert stats.judge(level, {"A": metrics_of(failed)}, 0.978, "bootstrap-t", bounds=(-500.0, 0.0)).verdict == (
+        stats.NOT_SUPPORTED
+    )
+    near = Claim("reaches", "reaches", "A", value=-450.0)
+    assert stats.judge(near, {"A": metrics_of(failed)}, 0.978, "bootstrap-t", bounds=(-500.0, 0.0)).verdict == (
+        stats.TOO_CLOSE
+    )
+
+
+def test_a_record_is_kept_by_a_command_that_does_not_read_it(tmp_path: Path) -> None:
+    (tmp_path / "study.yml").write_text(SEQUENTIAL)
+    study = load_study(tmp_path / "study.yml")
+    cache, results_dir = tmp_path / "cache", tmp_path / "results"
+    level, spread = {"n1": 20.0, "n3": 400.0, "n5": 60.0}, {"n1": 3.0, "n3": 3.0, "n5": 80.0}
+    fake_runs(cache, study.runs(sequential.seeds_wanted(study, {})), level, spread)
+    outputs.write_study(outputs.load_study_results(study, cache), results_dir, "python -m sb3_classic.studies study.yml")
+    recorded = pd.read_csv(results_dir / f"{study.name}-seeds.csv")
+    # Each seed trained alone (--separate): other settings, not read from the record, which its outputs keep
+    alone = dataclasses.replace(study, lockstep=False)
+    outputs.write_study(outputs.load_study_results(alone, tmp_path / "no-cache", results_dir), results_dir, "command")
+    kept = pd.read_csv(results_dir / f"{study.name}-seeds.csv")
+    assert sorted(kept["settings"]) == sorted(recorded["settings"])
+    assert outputs.load_study_results(study, tmp_path / "no-cache", results_dir).recorded == len(recorded)

@@ -6,6 +6,7 @@ where it runs: ``INSTALLED`` (folders in the working directory) or the repositor
 """
 
 import argparse
+import contextlib
 import dataclasses
 import os
 import time
@@ -195,7 +196,7 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
             study_runs = study.runs(sequential.seeds_planned(study))
             recorded = recorded_seeds(study, results_dir)
             cached = sum((run.spec.run_dir(args.cache_dir) / RUN_FILE).exists() for run in study_runs)
-            counted = sum(settings_key(run.spec) in recorded for run in study_runs)
+            counted = sum(settings_key(run.spec, study) in recorded for run in study_runs)
             seeds = f"{len(study.seeds)} seeds" if study.design is None else study.design.describe()
             console.print(
                 f"{study.name}: {len(study.variants)} variants × {len(study.readings)} "
@@ -240,6 +241,10 @@ def main(argv: Sequence[str] | None = None, defaults: Defaults = INSTALLED) -> i
         n_runs = sum(results.n_runs for results in loaded) + len(pending)
         status = run_missing_runs(n_runs, pending, args.workers, args.cache_dir, console, args.scheduler)
         if status is not None:
+            # Interrupted: the runs it finished are recorded in the outputs before it stops
+            with contextlib.suppress(DamagedRunError):
+                done = [load_study_results(study, args.cache_dir, results_dir) for study in studies]
+                write_outputs(studies, done, results_dir, budget, defaults, reduced, console, quiet=True)
             return status
         console.print(f"Runs: {time.perf_counter() - start:.0f} s")
         ran = True

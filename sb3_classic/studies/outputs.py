@@ -94,17 +94,21 @@ class StudyResults:
         return math.fsum(self.run_seconds.values())
 
 
-def settings_key(spec: RunSpec) -> str:
+def settings_key(spec: RunSpec, study: StudySpec) -> str:
     """
+    :param spec: a run of ``study``
+    :param study: the study (its threshold and window, which its recorded metrics depend on)
     :return: the key of a run's settings and seed without its code's digest (``RunSpec.key`` has it): a seed recorded
-        in a study's committed ``<name>-seeds.csv`` counts as run while its settings, seed and sb3_classic's release
-        are the same (the package keeps seeded training identical between releases' edits, ``benchmarks.digest``;
-        a change of results comes with a new release)
+        in a study's committed ``<name>-seeds.csv`` counts as run while its settings, seed, metrics' threshold and
+        sb3_classic's release are the same (the package keeps seeded training identical between releases' edits,
+        ``benchmarks.digest``; a change of results comes with a new release)
     """
     content = {
         "hyperparams": spec.hyperparams,
         "run": {name: getattr(spec, name) for name in ("algo", "env_id", "seed", "n_timesteps", "max_episodes", "lockstep")},
         "release": sb3_classic.__version__,
+        # (NaN, no threshold, as a string: JSON has no NaN)
+        "threshold": [repr(study.threshold), study.threshold_window],
     }
     return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()[:16]
 
@@ -141,7 +145,7 @@ def load_study_results(study: StudySpec, cache_dir: Path, results_dir: Path | No
     values: dict[tuple[str, str], list[dict[str, float]]] = {}
     for run in study.runs(sequential.seeds_planned(study)):
         run_dir, key = run.spec.run_dir(cache_dir), (run.reading, run.variant)
-        settings, record = settings_key(run.spec), None
+        settings, record = settings_key(run.spec, study), None
         if (run_dir / RUN_FILE).exists():
             summary = load_run(run_dir)
             seconds = float(summary["learn_time_s"]) + float(summary.get("eval_time_s", 0.0))
@@ -174,7 +178,9 @@ def load_study_results(study: StudySpec, cache_dir: Path, results_dir: Path | No
         for record in found:
             at = None if record else next(index)
             for name, column in columns.items():
-                column.append(record.get(name, np.nan) if record else computed[name][at])
+                # (a study without a threshold records no episodes to threshold: NaN, and not reached)
+                missing = False if name == "reached" else np.nan
+                column.append(record.get(name, missing) if record else computed[name][at])
         results.metrics[key] = {
             name: np.asarray(column, dtype=bool if name == "reached" else float) for name, column in columns.items()
         }
@@ -192,7 +198,10 @@ def load_study_results(study: StudySpec, cache_dir: Path, results_dir: Path | No
                 metrics: dict[str, Any] = {variant: variants[variant] for variant in needed}
                 margin = sequential.claim_margin(study, claim)
                 if study.design is not None and reading == STATED:
-                    looked = sequential.judge_sequentially(claim, metrics, study.design, margin)
+                    # A look's n seeds are the study's first n: a variant's found after a gap wait for it
+                    prefix = {name: _consecutive(study, results.seeds[(reading, name)]) for name in needed}
+                    metrics = {name: _first_seeds({name: metrics[name]}, prefix[name])[name] for name in needed}
+                    looked = sequential.judge_sequentially(claim, metrics, study.design, margin, study.return_range())
                     if looked is None:
                         continue
                     results.looks[claim.text] = looked
@@ -206,6 +215,12 @@ def load_study_results(study: StudySpec, cache_dir: Path, results_dir: Path | No
     wanted = sequential.seeds_wanted(study, results.looks)
     results.missing = [run for run in study.runs(wanted) if run.seed not in results.seeds.get((run.reading, run.variant), [])]
     return results
+
+
+def _consecutive(study: StudySpec, seeds: Sequence[int]) -> int:
+    """:return: how many of the study's first seeds, in order, are among ``seeds`` (found in the cache or recorded)"""
+    found = set(seeds)
+    return next((index for index, seed in enumerate(study.seeds) if seed not in found), len(study.seeds))
 
 
 def _first_seeds(metrics: dict[str, Any], n: int | None) -> dict[str, Any]:
@@ -407,11 +422,17 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
     study = results.study
     results_dir.mkdir(parents=True, exist_ok=True)
     figure = results_dir / f"{study.name}.png"
-    if results.returns or not figure.exists():
-        # (runs counted from the seeds' record alone have no episodes to draw: the figure drawn before them is kept)
+    if not figure.exists() or not results.recorded:
+        # (runs counted from the seeds' record have no episodes to draw: the figure drawn with them is kept)
         plot_study(results, figure)
     summary_frame(results).to_csv(results_dir / f"{study.name}.csv", index=False)
-    seeds_frame(results).to_csv(results_dir / f"{study.name}-seeds.csv", index=False)
+    seeds = seeds_frame(results)
+    # The rows of other settings recorded before (another release, --separate, another threshold) are kept: a record is
+    # never lost to a command that did not read it
+    kept = [row for key, row in recorded_seeds(study, results_dir).items() if key not in set(seeds["settings"])]
+    pd.concat([seeds, pd.DataFrame(kept, columns=seeds.columns)] if kept else [seeds]).to_csv(
+        results_dir / f"{study.name}-seeds.csv", index=False
+    )
     claims = []
     for reading, judged in results.verdicts.items():
         for result in judged:

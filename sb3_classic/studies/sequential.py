@@ -161,6 +161,7 @@ def judge_sequentially(
     metrics: Mapping[str, Mapping[str, np.ndarray]],
     design: SequentialDesign,
     margin: float | None = None,
+    bounds: tuple[float, float] | None = None,
 ) -> SequentialVerdict | None:
     """
     Replay a claim's looks on the seeds found: at look k, each variant's first n_k seeds, judged at that look's level;
@@ -170,6 +171,7 @@ def judge_sequentially(
     :param metrics: per variant, its ``stats.seed_metrics``, the seeds in the order of the study's (0, 1, ...)
     :param design: the looks
     :param margin: a ``better`` claim's equivalence margin (``stats.judge``)
+    :param bounds: the env's range of returns (``stats.judge``), or None
     :return: its verdict, or None if its variants lack the first look's seeds
     """
     found = min(len(metrics[name][claim.metric]) for name in (claim.variant, *claim.others))
@@ -178,7 +180,7 @@ def judge_sequentially(
         if found < n:
             break
         first = {name: {key: values[:n] for key, values in metrics[name].items()} for name in (claim.variant, *claim.others)}
-        result = stats.judge(claim, first, confidence, design.method, margin)
+        result = stats.judge(claim, first, confidence, design.method, margin, bounds)
         last = index == len(design.looks) - 1
         if stats.is_decided(result.verdict) or last:
             needed = "" if stats.is_decided(result.verdict) else seeds_needed(claim, first, design, margin)
@@ -209,31 +211,37 @@ def seeds_needed(
         np.asarray(metrics[name]["reached"]).any() for name in (claim.variant, *claim.others)
     ):
         return "no seed of a variant reached the threshold: more episodes per run, not more seeds, would measure it"
+    sign = 1.0 if stats.higher_is_better(claim) else -1.0
     if claim.kind in ("reaches", "below"):
         assert claim.value is not None
         gap = abs(_statistic(ours, claim.statistic) - claim.value)
-        spread = _spread(ours, claim.statistic)
-        difference = _count(z, spread, gap)
-        equivalence = None
+        difference, equivalence = _count(z, _spread(ours, claim.statistic), gap), None
     else:
-        counts, equivalences = [], []
+        width = claim.margin if claim.kind == "similar" else margin
+        shown: list[float] = []
+        against: list[float] = []
+        alike: list[float] = []
         for other in claim.others:
             theirs = np.asarray(metrics[other][claim.metric], dtype=float)
-            gap = abs(_statistic(ours, claim.statistic) - _statistic(theirs, claim.statistic))
-            spread = np.hypot(_spread(ours, claim.statistic), _spread(theirs, claim.statistic))
-            counts.append(_count(z, spread, gap))
-            if claim.kind == "similar" or margin is not None:
-                width = (claim.margin if claim.kind == "similar" else margin) or 0.0
-                equivalences.append(_count(z, spread, width - gap) if gap < width else np.inf)
-        # A claim over several variants needs every comparison decided
-        difference = max(counts)
-        equivalence = max(equivalences) if equivalences else None
-    if claim.kind == "similar":
-        difference, equivalence = equivalence if equivalence is not None else np.inf, None
+            gap = _statistic(ours, claim.statistic) - _statistic(theirs, claim.statistic)
+            spread = float(np.hypot(_spread(ours, claim.statistic), _spread(theirs, claim.statistic)))
+            # A difference the claim's way (shown), or against it, and how many seeds would show it alike
+            (shown if sign * gap > 0 or claim.kind == "similar" else against).append(_count(z, spread, abs(gap)))
+            if width is not None:
+                alike.append(_count(z, spread, width - abs(gap)) if abs(gap) < width else np.inf)
+        if claim.kind == "similar":
+            # Supported: every comparison alike; not supported: one difference shown
+            difference, equivalence = min(shown), max(alike) if alike else None
+        else:
+            # Supported: every comparison shown the claim's way; not supported: one shown against it, or alike
+            difference = min([max(shown) if shown and not against else np.inf, *against])
+            equivalence = min(alike) if alike else None
     best = min(difference, equivalence if equivalence is not None else np.inf)
     if best <= PRACTICAL_SEEDS:
         which = "an equivalence verdict" if equivalence is not None and equivalence < difference else "a verdict"
-        return f"about {int(np.ceil(best))} seeds per variant would give {which} at {POWER:.0%} power"
+        # (at least one more look's worth: the claim was not decided by the seeds it has)
+        count = max(int(np.ceil(best)), design.max + design.step)
+        return f"about {count} seeds per variant would give {which} at {POWER:.0%} power"
     if equivalence is not None and np.isfinite(equivalence):
         return f"out of practical reach (over {PRACTICAL_SEEDS} seeds per variant, even for an equivalence verdict)"
     return f"out of practical reach (over {PRACTICAL_SEEDS} seeds per variant)"

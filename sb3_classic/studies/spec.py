@@ -238,6 +238,11 @@ class StudySpec:
         # Every episode at the time limit, and the unfinished episodes of the other envs
         return (self.budget.episodes + n_envs) * limit
 
+    def return_range(self) -> tuple[float, float] | None:
+        """:return: the lowest and highest return of an episode of its env (``return_range``), or None where unknown"""
+        settings = [self.hyperparams, *self.variants.values(), *self.readings.values()]
+        return return_range(self.env_id, env_spec(self.env_id), settings)
+
     def runs(self, counts: Mapping[tuple[str, str], int] | None = None) -> list[StudyRun]:
         """
         :param counts: per (reading, variant), how many of the study's seeds to run, its first (a sequential design's

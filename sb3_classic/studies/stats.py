@@ -16,8 +16,8 @@ The rule (also in ``STUDIES.md``):
   level) is the opposite claim. Both compare on the metric's own scale, whichever way is better: "the spread is
   below 20", "episodes to threshold below 200".
 
-- With an equivalence margin m (``judge``'s ``margin``: a sequential design's, ``sb3_classic.studies.sequential``), a
-  ``better`` comparison whose interval lies within ± m is decided: *not supported: alike within ±m*.
+- With an equivalence margin m (``judge``'s ``margin``: the study's, ``sequential.claim_margin``), a ``better``
+  comparison whose interval lies within ± m is decided: *not supported: alike within ±m*.
 - Any claim whose variants have fewer than ``MIN_SEEDS`` seeds is *too close to call*, whatever its intervals: a
   bootstrap over 2–4 values gives an interval, but not a 95% one.
 - Episodes to threshold is censored: a seed that never reaches the threshold counts as its episode budget, a lower
@@ -32,9 +32,10 @@ consistent learning across seeds, where lower is better).
 Intervals (``INTERVAL_METHODS``): ``bootstrap``, BCa over seeds at 95%, the fixed design's; ``bootstrap-t``, the
 studentized bootstrap of a mean or a difference of means (Efron & Tibshirani 1993, *An Introduction to the Bootstrap*,
 §12.5: the quantiles of (mean* − mean) / se* over resamples, se with Welch's standard error), the sequential design's at
-each look's level. At 5–40 seeds of skewed, bounded returns, BCa's intervals are too narrow at the higher levels a
-sequential design's looks need, and Student's t-interval of one variant's mean misses on the skewed side; the
-bootstrap-t holds its level there (``benchmarks/results/studies/error-control.md``). Written here by hand: SciPy's
+each look's level, joined with Student's t-interval (``_studentized``). At 5–40 seeds of skewed, bounded returns,
+BCa's intervals are too narrow at the higher levels a sequential design's looks need, Student's t-interval of one
+variant's mean misses on the skewed side, and the bootstrap-t alone on the side of a few rare values among many equal
+ones (``benchmarks/results/studies/error-control.md``). Written here by hand: SciPy's
 ``bootstrap`` has no studentized method. ``t``: Student's interval of a mean and Welch's of a difference
 (``scipy.stats.ttest_1samp``, ``ttest_ind``), for comparison. A spread (``std``) keeps BCa.
 """
@@ -59,6 +60,8 @@ SUPPORTED = "supported"
 NOT_SUPPORTED = "not supported"
 REVERSED = "reversed"
 TOO_CLOSE = "too close to call"
+#: The metrics that are returns (whose bounds are the env's range of returns)
+RETURN_METRICS = ("mean_return", "last_100_return")
 #: A ``better`` comparison whose interval lies within ± the margin (``alike``)
 ALIKE = "alike within"
 #: Fewer seeds than this in a variant of a claim: no verdict but too close to call (the report ran 5, the studies 10)
@@ -173,7 +176,12 @@ def _statistic(name: str) -> Callable[..., Any]:
 
 
 def interval(
-    values: np.ndarray, statistic: str = "mean", seed: int = 0, confidence: float = CONFIDENCE, method: str = "bootstrap"
+    values: np.ndarray,
+    statistic: str = "mean",
+    seed: int = 0,
+    confidence: float = CONFIDENCE,
+    method: str = "bootstrap",
+    bounds: tuple[float, float] | None = None,
 ) -> Interval:
     """
     :param values: one value per seed
@@ -182,6 +190,8 @@ def interval(
     :param confidence: the interval's level
     :param method: ``bootstrap`` (BCa; percentile where BCa is undefined), ``bootstrap-t`` (studentized, of a mean; a
         ``std`` keeps BCa) or ``t`` (Student's)
+    :param bounds: the lowest and highest value a seed can have (an env's range of returns), for ``bootstrap-t``'s
+        interval of seeds that all have one value (``point_mass``); None: that value alone
     :return: the statistic and its interval
     """
     values = np.asarray(values, dtype=float)
@@ -192,12 +202,14 @@ def interval(
         # (NaN: a seed that completed no episode, which has no return)
         return Interval(estimate, float("nan"), float("nan"))
     if np.ptp(values) == 0:
+        if method == "bootstrap-t" and statistic == "mean" and bounds is not None:
+            return Interval(estimate, *point_mass(estimate, len(values), confidence, bounds))
         return Interval(estimate, estimate, estimate)
     if method == "bootstrap-t" and statistic == "mean":
         return _studentized((values,), confidence, seed)
     if method == "t" and statistic == "mean":
-        bounds = stats.ttest_1samp(values, 0.0).confidence_interval(confidence)
-        return Interval(estimate, float(bounds.low), float(bounds.high))
+        student = stats.ttest_1samp(values, 0.0).confidence_interval(confidence)
+        return Interval(estimate, float(student.low), float(student.high))
     return _bootstrap((values,), lambda x, axis=-1: function(x, axis=axis), estimate, seed, confidence)
 
 
@@ -208,6 +220,7 @@ def difference_interval(
     seed: int = 0,
     confidence: float = CONFIDENCE,
     method: str = "bootstrap",
+    bounds: tuple[float, float] | None = None,
 ) -> Interval:
     """
     :param a: one value per seed of a variant
@@ -217,6 +230,7 @@ def difference_interval(
     :param confidence: the interval's level
     :param method: ``bootstrap`` (BCa), ``bootstrap-t`` (studentized, of a difference of means; a ``std`` keeps BCa) or
         ``t`` (Welch's)
+    :param bounds: as ``interval``'s, for two variants whose seeds each have one value
     :return: statistic(a) − statistic(b) and its interval
     """
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
@@ -226,22 +240,48 @@ def difference_interval(
     if min(len(a), len(b)) < (3 if statistic == "std" else 2) or np.isnan(a).any() or np.isnan(b).any():
         return Interval(estimate, float("nan"), float("nan"))
     if np.ptp(a) == 0 and np.ptp(b) == 0:
+        if method == "bootstrap-t" and statistic == "mean" and bounds is not None:
+            # Each variant's interval at half the miss rate, so that the difference's holds at its level
+            level = 1 - (1 - confidence) / 2
+            low_a, high_a = point_mass(float(a[0]), len(a), level, bounds)
+            low_b, high_b = point_mass(float(b[0]), len(b), level, bounds)
+            return Interval(estimate, low_a - high_b, high_a - low_b)
         return Interval(estimate, estimate, estimate)
     if method == "bootstrap-t" and statistic == "mean":
         return _studentized((a, b), confidence, seed)
     if method == "t" and statistic == "mean":
-        bounds = stats.ttest_ind(a, b, equal_var=False).confidence_interval(confidence)
-        return Interval(estimate, float(bounds.low), float(bounds.high))
+        welch = stats.ttest_ind(a, b, equal_var=False).confidence_interval(confidence)
+        return Interval(estimate, float(welch.low), float(welch.high))
     difference = lambda x, y, axis=-1: function(x, axis=axis) - function(y, axis=axis)  # noqa: E731
     return _bootstrap((a, b), difference, estimate, seed, confidence)
+
+
+def point_mass(value: float, n: int, confidence: float, bounds: tuple[float, float]) -> tuple[float, float]:
+    """
+    The interval of a mean from ``n`` seeds that all have one value, where each seed's value lies within ``bounds``:
+    n seeds at a value do not show that every seed lands there. The share p of seeds elsewhere is at most
+    1 − (tail)^(1/n) at one-sided level 1 − tail (Clopper–Pearson's bound at 0 successes; about 3/n at 95%, the
+    "rule of three"), and those seeds are at most at a bound: the mean lies within value ± p · (distance to the bound).
+
+    :return: the interval's bounds
+    """
+    tail = (1 - confidence) / 2
+    share = 1 - tail ** (1 / n)
+    low, high = bounds
+    return value - share * max(value - low, 0.0), value + share * max(high - value, 0.0)
 
 
 def _studentized(data: tuple[np.ndarray, ...], confidence: float, seed: int) -> Interval:
     """
     The studentized bootstrap (bootstrap-t) interval of a mean, or of the difference of two means (each variant's seeds
     resampled apart): estimate − q_{1−a} · se to estimate − q_a · se, where q are the quantiles of t* = (estimate* −
-    estimate) / se* over ``N_RESAMPLES`` resamples and se is Welch's standard error (√(Σ s_i² / n_i)). A resample of
-    constant values has se* = 0 and t* = ±inf: an order statistic at infinity leaves that side of the interval open.
+    estimate) / se* over ``N_RESAMPLES`` resamples and se is Welch's standard error (√(Σ s_i² / n_i)); joined with
+    Student's (Welch's) t-interval, the wider bound of the two on each side.
+
+    Why both: many seeds at one return (a solved CartPole-v1 at 500, a failed Acrobot-v1 at −500) make resamples of
+    constant values, whose se* is 0 (floored here at the smallest positive se* of the resamples, not to divide by 0),
+    and the bootstrap-t then undercovers the side of the rare values, where the t-interval holds; on skewed returns it
+    is the other way. An interval that contains both misses only where both miss.
     """
     rng = np.random.default_rng(seed)
     signs = (1.0, -1.0)[: len(data)]
@@ -250,13 +290,16 @@ def _studentized(data: tuple[np.ndarray, ...], confidence: float, seed: int) -> 
     resampled = [values[rng.integers(0, len(values), (N_RESAMPLES, len(values)))] for values in data]
     estimates = sum(sign * sample.mean(axis=1) for sign, sample in zip(signs, resampled, strict=False))
     errors = np.sqrt(sum(sample.var(axis=1, ddof=1) / sample.shape[1] for sample in resampled))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t = (estimates - estimate) / errors
-    # (0/0: a resample equal to the sample's estimate with no spread: no evidence either way)
-    t = np.where(np.isnan(t), 0.0, t)
+    positive = errors[errors > 0]
+    t = (estimates - estimate) / np.maximum(errors, positive.min() if len(positive) else se)
     tail = (1 - confidence) / 2
     low_t, high_t = np.quantile(t, [1 - tail, tail], method="inverted_cdf")
-    return Interval(estimate, float(estimate - low_t * se), float(estimate - high_t * se))
+    if len(data) == 1:
+        student = stats.ttest_1samp(data[0], 0.0).confidence_interval(confidence)
+    else:
+        student = stats.ttest_ind(data[0], data[1], equal_var=False).confidence_interval(confidence)
+    low, high = min(estimate - low_t * se, float(student.low)), max(estimate - high_t * se, float(student.high))
+    return Interval(estimate, float(low), float(high))
 
 
 def _bootstrap(
@@ -387,6 +430,7 @@ def judge(
     confidence: float = CONFIDENCE,
     method: str = "bootstrap",
     margin: float | None = None,
+    bounds: tuple[float, float] | None = None,
 ) -> ClaimResult:
     """
     :param claim: the claim
@@ -395,10 +439,12 @@ def judge(
     :param method: how they are computed (``INTERVAL_METHODS``)
     :param margin: a ``better`` claim's equivalence margin, in the metric's units: a comparison whose interval lies
         within ± it is *not supported: alike within ±margin* (None: no such verdict)
+    :param bounds: the env's range of returns, for a return metric's intervals (``interval``)
     :return: the verdict by the rule of this module's docstring
     """
     sign = 1.0 if higher_is_better(claim) else -1.0
     ours = metrics[claim.variant][claim.metric]
+    bounds = bounds if claim.metric in RETURN_METRICS else None
     censored_notes: list[str] = []
     what = METRIC_LABELS[claim.metric] + (", spread over seeds (std)" if claim.statistic == "std" else "")
     comparisons = []
@@ -406,7 +452,7 @@ def judge(
         parts = []
         for other in claim.others:
             difference = difference_interval(
-                ours, metrics[other][claim.metric], claim.statistic, confidence=confidence, method=method
+                ours, metrics[other][claim.metric], claim.statistic, confidence=confidence, method=method, bounds=bounds
             )
             if claim.kind == "better":
                 oriented = sorted((sign * difference.low, sign * difference.high))
@@ -429,7 +475,7 @@ def judge(
             measured += f" (equivalence margin ±{margin:g})"
     else:
         assert claim.value is not None
-        value = interval(ours, claim.statistic, confidence=confidence, method=method)
+        value = interval(ours, claim.statistic, confidence=confidence, method=method, bounds=bounds)
         # On the metric's own scale, whichever way is better: "reaches" is ≥ the level, "below" is < it
         low, high = value.low - claim.value, value.high - claim.value
         if np.isnan(low):
