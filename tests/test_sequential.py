@@ -11,7 +11,7 @@ import pytest
 from scipy import stats as scipy_stats
 
 from sb3_classic.studies import outputs, sequential, stats
-from sb3_classic.studies.spec import STATED, Claim, StudyError, StudyRun, load_study
+from sb3_classic.studies.spec import STATED, Claim, StudyError, StudyRun, StudySpec, load_study
 
 SEQUENTIAL = """
 title: Tiny sequential
@@ -240,6 +240,9 @@ def test_the_error_rate_holds_under_optional_stopping() -> None:
         assert naive_wrong > wrong, f"{name}: naive {naive_wrong:.1%}, chosen {wrong:.1%}"
 
 
+LEVEL, SPREAD = {"n1": 20.0, "n3": 400.0, "n5": 60.0}, {"n1": 3.0, "n3": 3.0, "n5": 80.0}
+
+
 def fake_runs(cache: Path, runs: Sequence[StudyRun], level: dict[str, float], spread: dict[str, float]) -> None:
     """Cache entries of ``runs`` (as the harness writes them), 6 episodes of one return per seed, drawn per variant."""
     for run in runs:
@@ -252,17 +255,23 @@ def fake_runs(cache: Path, runs: Sequence[StudyRun], level: dict[str, float], sp
         (run_dir / "episodes.csv").write_text("return\n" + "\n".join([f"{value:.3f}"] * 6) + "\n")
 
 
-def test_an_interrupted_study_resumes_look_by_look_from_its_cache_or_its_record(tmp_path: Path) -> None:
+def first_look(tmp_path: Path) -> tuple[StudySpec, Path, Path]:
+    """:return: the sequential study, a cache holding its first look's runs (n3 far above n1, n5 spread too widely to
+    tell), and where its outputs go"""
     (tmp_path / "study.yml").write_text(SEQUENTIAL)
     study = load_study(tmp_path / "study.yml")
     cache, results_dir = tmp_path / "cache", tmp_path / "results"
-    level, spread = {"n1": 20.0, "n3": 400.0, "n5": 60.0}, {"n1": 3.0, "n3": 3.0, "n5": 80.0}
-    fake_runs(cache, study.runs(sequential.seeds_wanted(study, {})), level, spread)
+    fake_runs(cache, study.runs(sequential.seeds_wanted(study, {})), LEVEL, SPREAD)
+    return study, cache, results_dir
+
+
+def test_an_interrupted_study_resumes_look_by_look_from_its_cache_or_its_record(tmp_path: Path) -> None:
+    study, cache, results_dir = first_look(tmp_path)
     first = outputs.load_study_results(study, cache)
     assert first.recorded == 0
     assert {run.variant for run in first.missing} == {"n1", "n5"}
     # The next look's runs done (as the runner would), then the study read again: the second look judged
-    fake_runs(cache, first.missing, level, spread)
+    fake_runs(cache, first.missing, LEVEL, SPREAD)
     second = outputs.load_study_results(study, cache)
     verdict = second.looks["n = 5 beats n = 1"]
     assert verdict.looks_taken == 2 or verdict.decided
@@ -298,11 +307,7 @@ def test_seeds_at_one_value_give_a_finite_interval_within_the_envs_returns() -> 
 
 
 def test_a_record_is_kept_by_a_command_that_does_not_read_it(tmp_path: Path) -> None:
-    (tmp_path / "study.yml").write_text(SEQUENTIAL)
-    study = load_study(tmp_path / "study.yml")
-    cache, results_dir = tmp_path / "cache", tmp_path / "results"
-    level, spread = {"n1": 20.0, "n3": 400.0, "n5": 60.0}, {"n1": 3.0, "n3": 3.0, "n5": 80.0}
-    fake_runs(cache, study.runs(sequential.seeds_wanted(study, {})), level, spread)
+    study, cache, results_dir = first_look(tmp_path)
     outputs.write_study(outputs.load_study_results(study, cache), results_dir, "python -m sb3_classic.studies study.yml")
     recorded = pd.read_csv(results_dir / f"{study.name}-seeds.csv")
     # Each seed trained alone (--separate): other settings, not read from the record, which its outputs keep
