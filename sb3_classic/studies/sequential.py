@@ -96,8 +96,8 @@ class SequentialDesign:
     :param max: the most seeds per variant (the last look)
     :param boundary: the shape of the looks' boundaries (``BOUNDARIES``)
     :param alpha: the error rate per claim, over all its looks
-    :param method: the looks' intervals (``stats.INTERVAL_METHODS``: the bootstrap-t, which holds α at these seed counts,
-        ``benchmarks/results/studies/error-control.md``)
+    :param method: the looks' intervals (``stats.INTERVAL_METHODS``: by default the bootstrap-t joined with Student's t,
+        which hold α at these seed counts where BCa does not, ``benchmarks/results/studies/error-control.md``)
     """
 
     start: int
@@ -121,7 +121,7 @@ class SequentialDesign:
         return tuple(float(1 - 2 * scipy_stats.norm.sf(b)) for b in bounds)
 
     def describe(self) -> str:
-        """:return: e.g. ``looks at 10, 20, 30, 40 seeds (Pocock boundaries, 98.18% intervals each)``"""
+        """:return: e.g. ``looks at 10, 20, 30 seeds per variant (Pocock boundaries, 97.79% intervals at each)``"""
         levels = sorted({f"{100 * level:.2f}%" for level in self.confidences})
         name = {"pocock": "Pocock", "obrien-fleming": "O'Brien–Fleming"}[self.boundary]
         each = (
