@@ -7,12 +7,13 @@ look every undecided claim is judged on the first ``n`` seeds of each of its var
 that verdict and draws no more seeds, and a variant draws the next look's seeds while some claim over it is
 undecided. A claim still undecided at ``max`` says how many seeds per variant would decide it (``seeds_needed``).
 
-Why the looks need wider intervals: a 95% interval taken at each of several looks, stopping at the first that
-excludes 0, says "difference" where there is none far more often than 5% (11–16% over 8 looks on the seed report's
-data). A group-sequential plan fixes this (Jennison & Turnbull 2000, *Group Sequential Methods*, ch. 2): the
-z-statistics of the looks of one claim are jointly normal with correlation √(n_i / n_j) (its information grows with
-the seeds), and the two-sided boundaries b_k are chosen so that P(|Z_k| ≥ b_k at some look) = α when there is no
-difference. ``boundaries`` solves for them with SciPy's multivariate normal distribution; the shapes:
+Why the looks need wider intervals: a 95% interval taken at each of several looks, stopping at the first that excludes
+0, says "difference" where there is none more often than 5% (up to 10% over 3 looks on data like the seed report's,
+``benchmarks/results/studies/error-control.md``). A group-sequential plan fixes this (Jennison & Turnbull 2000, *Group
+Sequential Methods*, ch. 2): the z-statistics of the looks of one claim are jointly normal with correlation √(n_i /
+n_j) (its information grows with the seeds), and the two-sided boundaries b_k are chosen so that P(|Z_k| ≥ b_k at some
+look) = α when there is no difference. ``boundaries`` solves for them with SciPy's multivariate normal distribution;
+the shapes:
 
 - ``pocock``: the same b at every look (Pocock 1977, *Biometrika* 64(2)); 2.361 for 4 looks at α = 0.05;
 - ``obrien-fleming``: b_k = c √(n_max / n_k), strict early and near 1.96 at the last (O'Brien & Fleming 1979,
