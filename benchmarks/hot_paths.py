@@ -140,7 +140,11 @@ def linear_sgd_updates() -> dict[str, Callable[[], None]]:
             model.policy.__dict__["tile_coding"] = None  # (LinearPolicy's dense update)
         # One transition: an observation, its action and its target (the weights move at every call, as in training)
         updates[variant] = functools.partial(
-            model._gradient_step, observation_batch(model, 1), np.array([1]), np.array([-3.0], dtype=np.float32)
+            model._gradient_step,
+            observation_batch(model, 1),
+            np.array([1]),
+            np.array([-3.0], dtype=np.float32),
+            np.array([1]),  # (its step in the episode: not the first, which restarts ObGD's traces)
         )  # type: ignore[assignment]
     return updates
 

@@ -91,8 +91,10 @@ def test_sarsa_logs_the_means_of_its_updates_predictions_and_targets(update_mode
     losses: list[float] = []
     gradient_step = model._gradient_step
 
-    def recorded(observations: np.ndarray, actions: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, float]:
-        q_predicted, loss = gradient_step(observations, actions, targets)
+    def recorded(
+        observations: np.ndarray, actions: np.ndarray, targets: np.ndarray, episode_steps: np.ndarray
+    ) -> tuple[np.ndarray, float]:
+        q_predicted, loss = gradient_step(observations, actions, targets, episode_steps)
         steps.append((q_predicted, targets.copy()))
         losses.append(float(loss))
         return q_predicted, loss
