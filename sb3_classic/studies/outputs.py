@@ -773,8 +773,9 @@ def _design_notes(results: StudyResults) -> list[str]:
     if results.recorded:
         notes.append(
             f"- {results.recorded} of the runs are counted from this folder's `{study.name}-seeds.csv` (run before; "
-            "the cache no longer holds them): their metrics count in the verdicts and the table, but without their "
-            "episodes the figure draws the seeds in the cache only."
+            "the cache no longer holds them): their metrics count in the verdicts and the table; without their "
+            "episodes, the figure is the one drawn from the seeds whose episodes were at hand (its legend names how "
+            "many)."
         )
     return notes
 
