@@ -493,7 +493,8 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         f"the {len(results.run_seconds)} distinct ones{_trained_how(results)}).",
         f"- Training: {training_summary(study)}.",
         _threshold_note(study, censored_at),
-        f"- Intervals: {_intervals(_fewest_seeds(results))}; verdicts by the rule of [STUDIES.md](STUDIES.md).",
+        f"- Intervals{' of the table' if study.design is not None else ''}: {_intervals(_fewest_seeds(results))}; "
+        "verdicts by the rule of [STUDIES.md](STUDIES.md).",
         *_design_notes(results),
         *_random_level_notes(results),
         *_short_budget_notes(study),
