@@ -71,7 +71,9 @@ def test_traces_restart_at_an_episode_start() -> None:
     for x, restart in (([1.0, 0.0, 2.0], True), ([0.5, 1.0, 0.0], False), ([0.0, 3.0, 1.0], True)):
         observation = th.tensor([x])
         td_step(optimizer, layer(observation).flatten(), th.tensor([1.0]), GAMMA * LAMBDA, restart)
-    # After a restart the trace is the gradient of that step alone: x(S_0) for the weight, 1 for the bias
+    # After a restart the trace is the gradient of that step alone: x(S_0) for the weight, 1 for the bias (compared
+    # exactly: a linear layer's gradient is its input, copied with no arithmetic that could round otherwise on
+    # another CPU)
     assert th.equal(optimizer.state[layer.weight]["eligibility_trace"], th.tensor([[0.0, 3.0, 1.0]]))
     assert th.equal(optimizer.state[layer.bias]["eligibility_trace"], th.tensor([1.0]))
     optimizer.reset_traces()
