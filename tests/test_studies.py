@@ -131,15 +131,18 @@ claim: {text: "8 tilings beat 4", kind: better, variant: n1, others: [four_tilin
             check_run(run.spec)  # builds the model as the zoo does: raises if the class were a string
 
 
-def test_readings_reinterpret_only_the_settings_a_variant_has(tmp_path: Path) -> None:
-    text = TINY.replace("claim:", "readings:\n  halved: {lr_decay_factor: 0.5, learning_rate: 0.002}\nclaim:").replace(
-        "n1: {n_steps: 1}", "n1: {n_steps: 1, lr_decay_every: 10, lr_decay_factor: 0.1}"
-    )
+def test_readings_reinterpret_the_settings_a_variant_has_or_the_study_leaves_unstated(tmp_path: Path) -> None:
+    text = TINY.replace(
+        "claim:", "readings:\n  halved: {lr_decay_factor: 0.5, learning_rate: 0.002, td_lambda: 0.8}\nclaim:"
+    ).replace("n1: {n_steps: 1}", "n1: {n_steps: 1, lr_decay_every: 10, lr_decay_factor: 0.1}")
     study = load_study(write_study(tmp_path, text))
     assert study.zoo_entry("n1", "halved")["lr_decay_factor"] == 0.5
     assert study.zoo_entry("n1", "halved")["learning_rate"] == 0.002
     # n3 has no decay: the reading's factor is not added to it
     assert "lr_decay_factor" not in study.zoo_entry("n3", "halved")
+    # λ, which the study states nowhere (the algorithm's default), is read otherwise in every variant
+    assert study.zoo_entry("n1", "halved")["td_lambda"] == study.zoo_entry("n3", "halved")["td_lambda"] == 0.8
+    assert "td_lambda" not in study.zoo_entry("n3")
     assert len(study.runs()) == 8
     assert study.runs()[0].spec.label == "study n1 seed 0"
     assert study.runs()[2].spec.label == "study n1 [halved] seed 0"
@@ -309,8 +312,8 @@ def test_study_file_errors_are_all_listed_at_once(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("changes", "expected"),
     [
-        # A reading of a setting the study does not state would run the same as stated, silently
-        ([("claim:", "readings:\n  gamma_0.9: {gamma: 0.9}\nclaim:")], "readings.gamma_0.9: changes no run"),
+        # A reading that sets what the study states would run the same as stated, silently
+        ([("claim:", "readings:\n  freq: {train_freq: 1}\nclaim:")], "readings.freq: changes no run"),
         # A reading of what tells the variants apart would make them one run
         (
             [
@@ -405,6 +408,45 @@ def test_verdicts_of_a_better_claim() -> None:
     consistent = claim(statistic="std")
     tight, wide = 300 + rng.normal(0, 1, 10), 300 + rng.normal(0, 100, 10)
     assert stats.judge(consistent, {"A": metrics_of(tight), "B": metrics_of(wide)}).verdict == stats.SUPPORTED
+
+
+def test_a_spread_is_decided_only_where_the_permutation_test_agrees() -> None:
+    consistent = claim(statistic="std")
+    # Every seed of A solved, three of B's ten not: BCa's interval of the spreads' difference excludes 0, but three
+    # seeds in ten off the optimum are what equal spreads give often (the permutation test: p ≈ 0.2)
+    solved = np.full(10, 500.0)
+    lumpy = np.array([500.0, 255.0, 500.0, 500.0, 268.0, 500.0, 500.0, 349.0, 500.0, 500.0])
+    bca = stats.difference_interval(solved, lumpy, "std")
+    assert bca.high < 0, bca
+    assert stats.spread_p_value(solved, lumpy) > 0.1
+    result = stats.judge(consistent, {"A": metrics_of(solved), "B": metrics_of(lumpy)})
+    assert result.verdict == stats.TOO_CLOSE, result.measured
+    assert "permutation test p = 0.2" in result.measured
+    # Spreads a hundredfold apart: both agree
+    rng = np.random.default_rng(3)
+    tight, wide = 300 + rng.normal(0, 1, 10), 300 + rng.normal(0, 100, 10)
+    assert stats.spread_p_value(tight, wide) < 0.001
+    assert stats.judge(consistent, {"A": metrics_of(tight), "B": metrics_of(wide)}).verdict == stats.SUPPORTED
+
+
+def test_the_spreads_permutation_test_holds_its_level_alike_or_shifted() -> None:
+    # Equal spreads, means 200 apart, skewed values: shuffled seeds mix the two locations, so the test rejects at 10%
+    # at most as often as 10% (100 pairs: at most 18, the binomial's 99.5% quantile)
+    rng = np.random.default_rng(0)
+    rejections = sum(
+        stats.spread_p_value(rng.exponential(50, 10), 200 + rng.exponential(50, 10), seed=index, n_resamples=999) < 0.1
+        for index in range(100)
+    )
+    assert rejections <= 18, rejections
+    # Alike in distribution (lumpy, as returns are): exact, about 10% of 200 pairs
+    alike = sum(
+        stats.spread_p_value(
+            *np.where(rng.random((2, 10)) < 0.8, 500.0, rng.uniform(0, 500, (2, 10))), seed=index, n_resamples=999
+        )
+        < 0.1
+        for index in range(200)
+    )
+    assert 8 <= alike <= 32, alike
 
 
 def test_too_few_seeds_give_no_verdict() -> None:

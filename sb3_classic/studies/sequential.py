@@ -121,6 +121,12 @@ class SequentialDesign:
         bounds = _boundaries(tuple(fractions), self.alpha, self.boundary)
         return tuple(float(1 - 2 * scipy_stats.norm.sf(b)) for b in bounds)
 
+    @property
+    def spread_level(self) -> float:
+        """The level of a spread's permutation test at each look (``stats.judge``): α/K over the K looks, Bonferroni's
+        bound, since the test is exact at each look and the boundaries' normal approximation is not."""
+        return self.alpha / len(self.looks)
+
     def describe(self) -> str:
         """:return: e.g. ``looks at 10, 20, 30 seeds per variant (Pocock boundaries, 97.79% intervals at each)``"""
         levels = sorted({f"{100 * level:.2f}%" for level in self.confidences})
@@ -181,7 +187,7 @@ def judge_sequentially(
         if found < n:
             break
         first = {name: {key: values[:n] for key, values in metrics[name].items()} for name in (claim.variant, *claim.others)}
-        result = stats.judge(claim, first, confidence, design.method, margin, bounds)
+        result = stats.judge(claim, first, confidence, design.method, margin, bounds, design.spread_level)
         last = index == len(design.looks) - 1
         if stats.is_decided(result.verdict) or last:
             needed = "" if stats.is_decided(result.verdict) else seeds_needed(claim, first, design, margin)

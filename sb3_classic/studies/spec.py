@@ -34,7 +34,7 @@ import contextlib
 import dataclasses
 import difflib
 import math
-from collections.abc import Hashable, Mapping, Sequence
+from collections.abc import Collection, Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeGuard
@@ -212,10 +212,9 @@ class StudySpec:
     def zoo_entry(self, variant: str, reading: str = STATED) -> dict[str, Any]:
         """
         :return: the zoo YAML entry of ``variant`` under ``reading``: the base, the variant's overrides, then the
-            reading's, for the settings the variant has (a reading reinterprets a setting, it does not add one: a
-            variant without learning-rate decay is the same run under every reading of its factor)
+            reading's (``read_entry``)
         """
-        entry = read_entry(self.hyperparams, self.variants[variant], self.readings[reading])
+        entry = read_entry(self.hyperparams, self.variants[variant], self.readings[reading], stated_keys(self))
         if isinstance(entry.get("policy_kwargs"), Mapping):
             entry["policy_kwargs"] = policy_kwargs_string(entry["policy_kwargs"])
         # The zoo requires it; the run's budget (and, with an episode budget, the callback that stops it) decides
@@ -309,14 +308,26 @@ def time_limit(spec: gymnasium.envs.registration.EnvSpec, env_kwargs: Mapping[st
     return limit if _is_int(limit) and limit > 0 else spec.max_episode_steps
 
 
-def read_entry(hyperparams: Mapping[str, Any], variant: Mapping[str, Any], reading: Mapping[str, Any]) -> dict[str, Any]:
+def read_entry(
+    hyperparams: Mapping[str, Any],
+    variant: Mapping[str, Any],
+    reading: Mapping[str, Any],
+    stated: Collection[str] = (),
+) -> dict[str, Any]:
     """
-    :return: the base ``hyperparams`` with a variant's overrides, then a reading's, for the settings the variant has
-        (a reading reinterprets a setting, it does not add one: a variant without learning-rate decay is the same run
-        under every reading of its factor)
+    :param stated: the settings the study states somewhere (in ``hyperparams`` or in some variant)
+    :return: the base ``hyperparams`` with a variant's overrides, then a reading's: for the settings the variant has
+        (a variant without learning-rate decay is the same run under every reading of its factor), and for those the
+        study states nowhere (left at the algorithm's default as stated, read otherwise in every variant: a
+        ``streaming`` reading adds ``td_lambda`` and ``normalize``)
     """
     entry = merge(hyperparams, variant)
-    return merge(entry, {key: value for key, value in reading.items() if key in entry})
+    return merge(entry, {key: value for key, value in reading.items() if key in entry or key not in stated})
+
+
+def stated_keys(study: "StudySpec") -> set[str]:
+    """:return: the settings ``study`` states in its ``hyperparams`` or in some variant"""
+    return set(study.hyperparams).union(*study.variants.values())
 
 
 def merge(base: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
@@ -873,6 +884,7 @@ def _check_readings(
     check: _Checker, hyperparams: Mapping[str, Any], variants: Mapping[str, Mapping[str, Any]], readings: Mapping[str, Any]
 ) -> None:
     """Each reading must change some run, and must not make two variants the same run."""
+    keys = set(hyperparams).union(*variants.values())
     stated = {name: read_entry(hyperparams, overrides, {}) for name, overrides in variants.items()}
     for reading, overrides in readings.items():
         if reading == STATED or not overrides:
@@ -887,13 +899,12 @@ def _check_readings(
                     "variants' policy_kwargs as mappings",
                 )
                 continue
-        read = {name: read_entry(hyperparams, variants[name], overrides) for name in variants}
+        read = {name: read_entry(hyperparams, variants[name], overrides, keys) for name in variants}
         if read == stated:
-            keys = ", ".join(map(str, overrides))
             check.fail(
                 where,
-                f"changes no run: a reading reinterprets a setting the study states, and {keys} is not set (to another "
-                "value) in hyperparams or any variant: add it to hyperparams with the value read as stated",
+                f"changes no run: {', '.join(map(str, overrides))} as the study states it (in hyperparams or every "
+                "variant): give the value read otherwise",
             )
             continue
         names = list(variants)
