@@ -3,21 +3,27 @@ NStepSARSA or REINFORCE per step with the streaming recipe (the entries of ``hyp
 SARSA(λ) along eligibility traces under ObGD, and ``hyperparams/reinforce_streaming.yml``: the book's per-step updates
 each bounded by ObGD; sparse initialisation, LayerNorm without parameters, SB3's VecNormalize) against the same network,
 initialisation and normalisation with Adam (SARSA: on the one-step squared TD error), over seeds, a fixed number of
-episodes each (SARSA: ε linear from 1 to 0.01 over the first 20k env steps). One env, torch 1 thread. It prints, per run:
-the mean return of the last 100 episodes, the first episode whose 100-episode mean reaches the level, and µs per env
-step.
+episodes each (SARSA: ε linear from 1 to 0.01 over the first 20k env steps). One env, torch 1 thread per run.
 
-    python -m benchmarks.streaming --seeds 0 1 2 --episodes 1000
-    python -m benchmarks.streaming --seeds 0 --optimizers obgd
-    python -m benchmarks.streaming --algo reinforce --seeds 0 --optimizers obgd --episodes 500
+Each finished run appends its episode returns to ``<out>/<algo>-<env>.csv`` and its summary to ``<out>/runs.csv``; a run
+found there is not run again, so an interrupted benchmark resumes where it stopped. ``--report`` writes the results page
+(``benchmarks/results/streaming.md``) and a figure per env from what is recorded.
+
+    python -m benchmarks.streaming --algo nstep_sarsa --env CartPole-v1 --seeds 0 1 2 --workers 2
+    python -m benchmarks.streaming --algo reinforce --env Acrobot-v1 --optimizers obgd --seeds 0 1
+    python -m benchmarks.streaming --report
 """
 
 import argparse
 import time
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
+import pandas as pd
 import torch as th
 import yaml
 from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
@@ -30,13 +36,17 @@ from sb3_classic.common.obgd import ObGD
 
 #: The algorithms, each with its streaming YAML
 ALGORITHMS: dict[str, type[NStepSARSA] | type[REINFORCE]] = {"nstep_sarsa": NStepSARSA, "reinforce": REINFORCE}
+NAMES = {"nstep_sarsa": "NStepSARSA (SARSA(λ))", "reinforce": "REINFORCE"}
 HYPERPARAMS = Path(__file__).resolve().parent.parent / "hyperparams"
-#: The level a run's 100-episode mean is timed to, per env
-LEVELS = {"CartPole-v1": 475.0, "Acrobot-v1": -100.0}
+RESULTS = Path(__file__).resolve().parent / "results"
+#: The level a run's 100-episode mean is timed to, per env (the zoo's thresholds; the seed report's −100 on Acrobot-v1)
+LEVELS = {"CartPole-v1": 475.0, "Acrobot-v1": -100.0, "LunarLander-v3": 200.0}
 #: Env steps over which ε goes from 1 to its final value
 EXPLORATION_STEPS = 20_000
 #: Adam's step size per step (the same network otherwise)
 ADAM_LEARNING_RATE = 5e-4
+#: Episodes of the moving mean (the last-100-episode mean, as the zoo's and the seed report's)
+WINDOW = 100
 
 
 def settings(algo: str, env_id: str, optimizer: str) -> dict[str, Any]:
@@ -55,45 +65,103 @@ def settings(algo: str, env_id: str, optimizer: str) -> dict[str, Any]:
 
 
 def run(algo: str, env_id: str, optimizer: str, seed: int, episodes: int) -> dict[str, Any]:
-    """:return: the run's episode returns, env steps and seconds"""
+    """:return: the run's episode returns, env steps and seconds of ``learn()``"""
+    th.set_num_threads(1)
     kwargs = settings(algo, env_id, optimizer)
     # A bound on the env steps (the callback stops at the episode count); ε decays over the first EXPLORATION_STEPS
-    total = max(episodes * 500, 2 * EXPLORATION_STEPS)
+    max_episode_steps = gym.spec(env_id).max_episode_steps or 1000
+    total = max(episodes * max_episode_steps, 2 * EXPLORATION_STEPS)
     if algo == "nstep_sarsa":
         kwargs["exploration_fraction"] = EXPLORATION_STEPS / total
     env = VecNormalize(make_vec_env(env_id, n_envs=1, seed=seed), gamma=kwargs["gamma"])
     model = ALGORITHMS[algo](env=env, seed=seed, device="cpu", **kwargs)
-    start = time.perf_counter()
+    start = time.process_time()
     model.learn(total, callback=StopTrainingOnMaxEpisodes(episodes))
-    seconds = time.perf_counter() - start
+    seconds = time.process_time() - start
     returns = np.asarray(env.env_method("get_episode_rewards")[0][:episodes], dtype=float)
-    return {"returns": returns, "steps": model.num_timesteps, "seconds": seconds}
+    return {
+        "algo": algo,
+        "env": env_id,
+        "optimizer": optimizer,
+        "seed": seed,
+        "returns": returns,
+        "steps": model.num_timesteps,
+        "cpu_seconds": seconds,
+    }
 
 
-def main(argv: list[str] | None = None) -> None:
+def summary(returns: np.ndarray, level: float) -> tuple[float, int | None]:
+    """:return: the mean of the last ``WINDOW`` episodes and the first episode (1-based) whose ``WINDOW``-episode mean
+    reaches ``level`` (None if none does)"""
+    means = np.convolve(returns, np.ones(WINDOW) / WINDOW, mode="valid")
+    reached = np.flatnonzero(means >= level)
+    return float(returns[-WINDOW:].mean()), (int(reached[0]) + WINDOW if len(reached) else None)
+
+
+def record(result: dict[str, Any], out: Path) -> None:
+    """Appends a finished run's episode returns and summary to ``out`` (the run is then done for a resumed benchmark)"""
+    out.mkdir(parents=True, exist_ok=True)
+    returns = result["returns"]
+    episodes = pd.DataFrame(
+        {
+            "optimizer": result["optimizer"],
+            "seed": result["seed"],
+            "episode": np.arange(1, len(returns) + 1),
+            "return": returns,
+        }
+    )
+    path = out / f"{result['algo']}-{result['env']}.csv"
+    episodes.to_csv(path, mode="a", header=not path.exists(), index=False, float_format="%.6g")
+    last, first = summary(returns, LEVELS[result["env"]])
+    row = {key: result[key] for key in ("algo", "env", "optimizer", "seed", "steps", "cpu_seconds")}
+    row.update(episodes=len(returns), last_100=round(last, 2), first_at_level=first or "")
+    runs = out / "runs.csv"
+    pd.DataFrame([row]).to_csv(runs, mode="a", header=not runs.exists(), index=False)
+
+
+def done(out: Path) -> set[tuple[str, str, str, int]]:
+    """:return: the (algo, env, optimizer, seed) runs recorded in ``out``"""
+    runs = out / "runs.csv"
+    if not runs.exists():
+        return set()
+    table = pd.read_csv(runs)
+    return {(a, e, o, int(s)) for a, e, o, s in table[["algo", "env", "optimizer", "seed"]].itertuples(index=False)}
+
+
+def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--algo", default="nstep_sarsa", choices=sorted(ALGORITHMS))
-    parser.add_argument("--env", default="CartPole-v1", choices=sorted(LEVELS))
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--algo", nargs="+", default=["nstep_sarsa"], choices=sorted(ALGORITHMS))
+    parser.add_argument("--env", nargs="+", default=["CartPole-v1"], choices=sorted(LEVELS))
+    parser.add_argument("--seeds", type=int, nargs="+", default=list(range(10)))
     parser.add_argument("--episodes", type=int, default=1000)
     parser.add_argument("--optimizers", nargs="+", default=["obgd", "adam"], choices=["obgd", "adam"])
+    parser.add_argument("--workers", type=int, default=1, help="runs in parallel, each on one torch thread")
+    parser.add_argument("--out", type=Path, default=RESULTS / "streaming", help="where runs are recorded")
+    parser.add_argument("--report", action="store_true", help="only write the results page from the recorded runs")
     args = parser.parse_args(argv)
-    th.set_num_threads(1)
-    level = LEVELS[args.env]
-    print(f"| {args.env} | seed | last 100 episodes | first episode at {level:g} (100-episode mean) | env steps | µs/step |")
-    print("|---|---|---|---|---|---|")
-    for optimizer in args.optimizers:
-        for seed in args.seeds:
-            result = run(args.algo, args.env, optimizer, seed, args.episodes)
-            returns = result["returns"]
-            means = np.convolve(returns, np.ones(100) / 100, mode="valid")
-            reached = np.flatnonzero(means >= level)
-            first = str(int(reached[0]) + 100) if len(reached) else "never"
-            micros = 1e6 * result["seconds"] / result["steps"]
-            print(
-                f"| {optimizer} | {seed} | {returns[-100:].mean():.1f} | {first} | {result['steps']} | {micros:.0f} |",
-                flush=True,
-            )
+    if not args.report:
+        recorded = done(args.out)
+        jobs = [
+            (algo, env_id, optimizer, seed, args.episodes)
+            for algo in args.algo
+            for env_id in args.env
+            for optimizer in args.optimizers
+            for seed in args.seeds
+            if (algo, env_id, optimizer, seed) not in recorded
+        ]
+        print(f"{len(jobs)} runs to do ({len(recorded)} recorded in {args.out})", flush=True)
+        # Runs record from this process only, one at a time as they finish
+        with ProcessPoolExecutor(max_workers=args.workers) as pool:
+            for future in as_completed([pool.submit(run, *job) for job in jobs]):
+                result = future.result()
+                record(result, args.out)
+                last, first = summary(result["returns"], LEVELS[result["env"]])
+                micros = 1e6 * result["cpu_seconds"] / result["steps"]
+                name = " ".join(str(result[key]) for key in ("algo", "env", "optimizer", "seed"))
+                print(f"{name}: last 100 episodes {last:.1f}, first at level {first}, {micros:.0f} µs/step", flush=True)
+    from benchmarks.streaming_report import write_report
+
+    write_report(args.out, RESULTS / "streaming.md")
 
 
 if __name__ == "__main__":
