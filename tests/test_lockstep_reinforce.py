@@ -213,7 +213,8 @@ def test_the_inverse_cdf_draws_the_softmax_probabilities() -> None:
         (lambda: [REINFORCE("MultiInputPolicy", SimpleMultiObsEnv(), seed=0)], "CombinedExtractor"),
         (
             lambda: [make_member(0, policy_kwargs=dict(net_arch=[32], optimizer_class=th.optim.SGD))],
-            "optimizer SGD",
+            # (the optimizer alone: an SGD has no AMSGrad to report)
+            "optimizer SGD: a population's optimizers are Adam",
         ),
         (
             lambda: [make_member(0, policy_kwargs=dict(net_arch=[32], optimizer_kwargs=dict(weight_decay=1e-4)))],

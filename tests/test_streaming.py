@@ -207,6 +207,14 @@ def test_settings_obgd_cannot_train_are_refused(kwargs: dict[str, Any], match: s
 def test_obgd_with_several_envs_is_refused() -> None:
     with pytest.raises(ValueError, match=r"2 envs with optimizer_class=ObGD.*train on one env"):
         streaming_model(DummyVecEnv([lambda: ShortChain(4)] * 2))
+    # set_env too, before anything changes: the model keeps its env and trains on as before
+    model = streaming_model(DummyVecEnv([lambda: ShortChain(4)]))
+    model.learn(20)
+    with pytest.raises(ValueError, match=r"2 envs with optimizer_class=ObGD.*train on one env"):
+        model.set_env(DummyVecEnv([lambda: ShortChain(4)] * 2))
+    assert model.n_envs == model.get_env().num_envs == 1
+    model.learn(20, reset_num_timesteps=False)
+    assert model.num_timesteps == 40
 
 
 def test_save_load_keeps_the_traces(tmp_path: Path) -> None:

@@ -131,6 +131,25 @@ def check_arguments(owner: object, rules: Sequence[ArgumentRule]) -> None:
             check(*(getattr(owner, name) for name in names))
 
 
+def set_n_envs(model: Any, n_envs: int) -> None:
+    """
+    Give a model ``n_envs`` envs (``set_env``'s new ones) once its arguments pass their checks with them, else leave
+    it as it was: the rules that depend on the number of envs (one stream for ObGD's traces) hold for every env a
+    model is given, not only for the constructor's.
+
+    :param model: the algorithm (its ``n_envs`` and ``_check_arguments``)
+    :param n_envs: the new number of envs
+    :raises ValueError: from the first rule the new number breaks
+    """
+    before = model.n_envs
+    model.n_envs = n_envs
+    try:
+        model._check_arguments()
+    except ValueError:
+        model.n_envs = before
+        raise
+
+
 def constructor_parameters(cls: type) -> dict[str, inspect.Parameter]:
     """
     :param cls: a class

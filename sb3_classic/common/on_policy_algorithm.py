@@ -23,6 +23,7 @@ from sb3_classic.common.arguments import (
     check_policy_class,
     check_policy_kwargs,
     refuse_policy_kwargs_set_here,
+    set_n_envs,
 )
 from sb3_classic.common.buffers import Observations, TrajectoryBuffer, all_finite, select
 from sb3_classic.common.env_checks import (
@@ -689,6 +690,6 @@ class ClassicOnPolicyAlgorithm(SafeSaveLoadMixin, OnPolicyAlgorithm):
                     f"set_env(force_reset=False) needs the same number of envs ({self.n_envs}), got {env.num_envs}: "
                     "pass force_reset=True to start new episodes in the new envs"
                 )
-            self.n_envs = env.num_envs
+            set_n_envs(self, env.num_envs)
             self._make_buffer()
         super().set_env(env, force_reset=force_reset)

@@ -477,12 +477,17 @@ def check_adam(name: str, optimizer: th.optim.Optimizer, label: str = "optimizer
     :raises TypeError: for another optimizer than Adam without weight decay, AMSGrad or ``maximize`` (``StackedAdam``)
     """
     group = optimizer.param_groups[0]
-    if type(optimizer) is not th.optim.Adam or group["weight_decay"] or group["amsgrad"] or group["maximize"]:
-        raise TypeError(
-            f"{name}: {label} {type(optimizer).__name__} with weight_decay={group.get('weight_decay')!r}, "
-            f"amsgrad={group.get('amsgrad')!r}, maximize={group.get('maximize')!r}: a population's optimizers are Adam "
-            "without weight decay, AMSGrad or maximize (StackedAdam); leave optimizer_class and those kwargs out"
-        )
+    if type(optimizer) is not th.optim.Adam:
+        found = type(optimizer).__name__
+    elif group["weight_decay"] or group["amsgrad"] or group["maximize"]:
+        options = ", ".join(f"{key}={group[key]!r}" for key in ("weight_decay", "amsgrad", "maximize"))
+        found = f"Adam with {options}"
+    else:
+        return
+    raise TypeError(
+        f"{name}: {label} {found}: a population's optimizers are Adam without weight decay, AMSGrad or maximize "
+        "(StackedAdam); leave optimizer_class and those kwargs out"
+    )
 
 
 class MemberUpdate:
