@@ -565,7 +565,9 @@ resamples; each variant's seeds resampled independently):
 - **better** (A beats B on a metric): the interval of A − B, oriented so that positive means A is better (lower is
   better for episodes to threshold and for the spread over seeds). *supported* if it lies above 0, *reversed* if below
   0, *too close to call* if it contains 0. Against several variants: supported if every comparison is, reversed if
-  every one is reversed, *not supported* if some are reversed, too close to call otherwise.
+  every one is reversed, *not supported* if some are reversed, too close to call otherwise. On the spread over seeds,
+  supported or reversed also needs a permutation test of equal spreads (`scipy.stats.permutation_test`) to reject, at
+  5% (5%/K at each of a sequential design's K looks).
 - **similar** (A and B alike): *supported* if the interval of A − B lies within ± the claim's margin, *not supported* if
   it excludes 0, too close to call otherwise.
 - **reaches** / **below** a level, on the metric's own scale: the interval of A's metric lies at or above the level
@@ -732,8 +734,8 @@ def _family_note(n_claims: int, studies: Sequence[StudySpec]) -> str:
         f"{alpha:.0%} of the time ({sequential_ones}a fixed design takes 95% intervals). Over {n_claims} "
         f"{plural(n_claims, 'claim', 'claims')}, that is {alpha * n_claims:.1f} wrong verdicts expected if none had a "
         "difference, fewer as some do: no correction is made across claims, each is its own question. The rates "
-        "measured on synthetic per-seed data, and where they exceed the design's (a claim on the spread over seeds, "
-        "a level where most seeds sit at a bound of the returns; 10 seeds' BCa intervals): "
+        "measured on synthetic per-seed data, and where they exceed the design's (a level where most seeds sit at a "
+        "bound of the returns; 10 seeds' BCa intervals): "
         "[error-control.md](error-control.md)."
     )
 
