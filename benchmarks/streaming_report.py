@@ -25,6 +25,12 @@ BATCH_RUNS = {
     "LunarLander-v3": RESULTS / "lunar-lander" / "learning-runs.csv",
 }
 OPTIMIZERS = {"obgd": "streaming recipe (ObGD)", "adam": "Adam per step"}
+#: The runs the page's commands make: (algorithm, env, optimizer), 10 seeds each
+PLANNED = [
+    *((algo, env_id, optimizer) for algo in NAMES for env_id in ("CartPole-v1", "Acrobot-v1") for optimizer in OPTIMIZERS),
+    ("nstep_sarsa", "LunarLander-v3", "obgd"),
+]
+SEEDS = 10
 COLORS = {
     ("nstep_sarsa", "obgd"): "C0",
     ("nstep_sarsa", "adam"): "C9",
@@ -130,6 +136,18 @@ def plot_curves(episodes: dict[tuple[str, str], pd.DataFrame], env_id: str, path
     plt.close(figure)
 
 
+def _still_to_run(runs: pd.DataFrame) -> str:
+    """:return: the sentence naming the planned runs not recorded yet (the commands above resume them)"""
+    counts = runs.groupby(["algo", "env", "optimizer"]).size()
+    left = {planned: SEEDS - int(counts.get(planned, 0)) for planned in PLANNED}
+    missing = [
+        f"{NAMES[algo].split(' ')[0]} {env_id} {OPTIMIZERS[optimizer]} ({seeds})"
+        for (algo, env_id, optimizer), seeds in left.items()
+        if seeds > 0
+    ]
+    return "- Still to run (seeds): " + ", ".join(missing) + "." if missing else "- Every planned run is recorded."
+
+
 def write_report(out: Path, page: Path) -> None:
     """
     :param out: where ``python -m benchmarks.streaming`` recorded its runs
@@ -165,6 +183,8 @@ def write_report(out: Path, page: Path) -> None:
         f"- µs per env step: the run's CPU time in `learn()` over its env steps, torch 1 thread ({platform.machine()}, "
         "2 runs in parallel on 2 cores).",
         "- Versions: " + ", ".join(f"{name} {version}" for name, version in versions.items() if name != "sb3_classic") + ".",
+        "",
+        _still_to_run(runs),
         "",
         "The batch entries (`hyperparams/nstep_sarsa.yml`, `reinforce.yml`) are those of the learning benchmark "
         "(`learning.md`, `lunar-lander/learning.md`), measured by evaluations there: their final deterministic evaluation "
