@@ -138,6 +138,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--workers", type=int, default=1, help="runs in parallel, each on one torch thread")
     parser.add_argument("--out", type=Path, default=RESULTS / "streaming", help="where runs are recorded")
     parser.add_argument("--report", action="store_true", help="only write the results page from the recorded runs")
+    parser.add_argument("--page", type=Path, default=RESULTS / "streaming.md", help="the results page")
     args = parser.parse_args(argv)
     if not args.report:
         recorded = done(args.out)
@@ -161,7 +162,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                 print(f"{name}: last 100 episodes {last:.1f}, first at level {first}, {micros:.0f} µs/step", flush=True)
     from benchmarks.streaming_report import write_report
 
-    write_report(args.out, RESULTS / "streaming.md")
+    write_report(args.out, args.page)
 
 
 if __name__ == "__main__":

@@ -708,3 +708,23 @@ def test_masking_targets(sarsa_masked: list[float], ppo: list[float], verdicts: 
     }
     lines = masking.targets(summaries, masking.Settings(budget=3000))
     assert [line.rsplit(": ", 1)[1].removesuffix(".") for line in lines] == verdicts
+
+
+def test_the_streaming_benchmark_records_resumes_and_reports(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from benchmarks import streaming
+
+    args = ["--algo", "nstep_sarsa", "--seeds", "0", "--episodes", "3", "--out", str(tmp_path), "--page"]
+    streaming.main([*args, str(tmp_path / "streaming.md")])
+    runs = pd.read_csv(tmp_path / "runs.csv")
+    assert set(runs["optimizer"]) == {"obgd", "adam"}, runs
+    assert len(runs) == 2, runs
+    episodes = pd.read_csv(tmp_path / "nstep_sarsa-CartPole-v1.csv")
+    assert set(episodes["episode"]) == {1, 2, 3}
+    assert len(episodes) == 6
+    # A finished run is not run again; the page reads what is recorded
+    streaming.main([*args, str(tmp_path / "streaming.md")])
+    assert "0 runs to do (2 recorded" in capsys.readouterr().out
+    assert len(pd.read_csv(tmp_path / "runs.csv")) == 2
+    page = (tmp_path / "streaming.md").read_text()
+    assert "| NStepSARSA (SARSA(λ)) | streaming recipe (ObGD) | 1 |" in page
+    assert (tmp_path / "streaming-CartPole-v1.png").exists()
