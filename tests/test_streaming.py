@@ -212,7 +212,9 @@ def test_obgd_with_several_envs_is_refused() -> None:
     model.learn(20)
     with pytest.raises(ValueError, match=r"2 envs with optimizer_class=ObGD.*train on one env"):
         model.set_env(DummyVecEnv([lambda: ShortChain(4)] * 2))
-    assert model.n_envs == model.get_env().num_envs == 1
+    env = model.get_env()
+    assert env is not None
+    assert model.n_envs == env.num_envs == 1
     model.learn(20, reset_num_timesteps=False)
     assert model.num_timesteps == 40
 

@@ -438,15 +438,11 @@ def test_the_spreads_permutation_test_holds_its_level_alike_or_shifted() -> None
         for index in range(100)
     )
     assert rejections <= 18, rejections
-    # Alike in distribution (lumpy, as returns are): exact, about 10% of 200 pairs
-    alike = sum(
-        stats.spread_p_value(
-            *np.where(rng.random((2, 10)) < 0.8, 500.0, rng.uniform(0, 500, (2, 10))), seed=index, n_resamples=999
-        )
-        < 0.1
-        for index in range(200)
-    )
-    assert 8 <= alike <= 32, alike
+    # Alike in distribution (lumpy, as returns are): at most 10% of 200 pairs up to the binomial's 99.5% quantile (ties
+    # at 500 make the p-values discrete, so fewer is right too)
+    pairs = np.where(rng.random((200, 2, 10)) < 0.8, 500.0, rng.uniform(0, 500, (200, 2, 10)))
+    alike = sum(stats.spread_p_value(a, b, seed=index, n_resamples=999) < 0.1 for index, (a, b) in enumerate(pairs))
+    assert alike <= 32, alike
 
 
 def test_too_few_seeds_give_no_verdict() -> None:
