@@ -214,7 +214,8 @@ class StudySpec:
         :return: the zoo YAML entry of ``variant`` under ``reading``: the base, the variant's overrides, then the
             reading's (``read_entry``)
         """
-        entry = read_entry(self.hyperparams, self.variants[variant], self.readings[reading], stated_keys(self))
+        stated = stated_keys(self.hyperparams, self.variants)
+        entry = read_entry(self.hyperparams, self.variants[variant], self.readings[reading], stated)
         if isinstance(entry.get("policy_kwargs"), Mapping):
             entry["policy_kwargs"] = policy_kwargs_string(entry["policy_kwargs"])
         # The zoo requires it; the run's budget (and, with an episode budget, the callback that stops it) decides
@@ -325,9 +326,9 @@ def read_entry(
     return merge(entry, {key: value for key, value in reading.items() if key in entry or key not in stated})
 
 
-def stated_keys(study: "StudySpec") -> set[str]:
-    """:return: the settings ``study`` states in its ``hyperparams`` or in some variant"""
-    return set(study.hyperparams).union(*study.variants.values())
+def stated_keys(hyperparams: Mapping[str, Any], variants: Mapping[str, Mapping[str, Any]]) -> set[str]:
+    """:return: the settings a study states in its ``hyperparams`` or in some variant"""
+    return set(hyperparams).union(*variants.values())
 
 
 def merge(base: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
@@ -884,7 +885,7 @@ def _check_readings(
     check: _Checker, hyperparams: Mapping[str, Any], variants: Mapping[str, Mapping[str, Any]], readings: Mapping[str, Any]
 ) -> None:
     """Each reading must change some run, and must not make two variants the same run."""
-    keys = set(hyperparams).union(*variants.values())
+    keys = stated_keys(hyperparams, variants)
     stated = {name: read_entry(hyperparams, overrides, {}) for name, overrides in variants.items()}
     for reading, overrides in readings.items():
         if reading == STATED or not overrides:

@@ -277,9 +277,10 @@ def spread_p_value(a: np.ndarray, b: np.ndarray, seed: int = 0, n_resamples: int
     :param n_resamples: how many
     :return: the p-value of equal spreads
     """
+    spread = _statistic("std")
     result = stats.permutation_test(
         (np.asarray(a, dtype=float), np.asarray(b, dtype=float)),
-        lambda x, y, axis=-1: np.std(x, axis=axis, ddof=1) - np.std(y, axis=axis, ddof=1),
+        lambda x, y, axis=-1: spread(x, axis=axis) - spread(y, axis=axis),
         permutation_type="independent",
         vectorized=True,
         n_resamples=n_resamples,
