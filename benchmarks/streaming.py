@@ -9,8 +9,13 @@ Each finished run appends its episode returns to ``<out>/<algo>-<env>.csv`` and 
 found there is not run again, so an interrupted benchmark resumes where it stopped. ``--report`` writes the results page
 (``benchmarks/results/streaming.md``) and a figure per env from what is recorded.
 
+``--cost STEPS`` measures the cost per env step instead, paired: for each seed, a run of each optimizer for STEPS env
+steps, one after the other in this process (their order alternating from seed to seed), so that both see the same
+machine and load; the page gives the ratio per seed (``<out>/cost.csv``, resumable as the runs).
+
     python -m benchmarks.streaming --algo nstep_sarsa --env CartPole-v1 --seeds 0 1 2 --workers 2
     python -m benchmarks.streaming --algo reinforce --env Acrobot-v1 --optimizers obgd --seeds 0 1
+    python -m benchmarks.streaming --algo nstep_sarsa --env CartPole-v1 --cost 20000 --seeds 0 1 2 3 4
     python -m benchmarks.streaming --report
 """
 
@@ -64,19 +69,24 @@ def settings(algo: str, env_id: str, optimizer: str) -> dict[str, Any]:
     return entry
 
 
-def run(algo: str, env_id: str, optimizer: str, seed: int, episodes: int) -> dict[str, Any]:
-    """:return: the run's episode returns, env steps and seconds of ``learn()``"""
+def run(algo: str, env_id: str, optimizer: str, seed: int, episodes: int | None, steps: int | None = None) -> dict[str, Any]:
+    """
+    :param episodes: episodes to train for (None: ``steps`` env steps)
+    :param steps: env steps to train for, where ``episodes`` is None
+    :return: the run's episode returns, env steps and seconds of ``learn()``
+    """
     th.set_num_threads(1)
     kwargs = settings(algo, env_id, optimizer)
     # A bound on the env steps (the callback stops at the episode count); ε decays over the first EXPLORATION_STEPS
     max_episode_steps = gym.spec(env_id).max_episode_steps or 1000
-    total = max(episodes * max_episode_steps, 2 * EXPLORATION_STEPS)
+    total = max(episodes * max_episode_steps, 2 * EXPLORATION_STEPS) if episodes is not None else steps
+    assert total is not None, "run() takes episodes or steps"
     if algo == "nstep_sarsa":
-        kwargs["exploration_fraction"] = EXPLORATION_STEPS / total
+        kwargs["exploration_fraction"] = min(1.0, EXPLORATION_STEPS / total)
     env = VecNormalize(make_vec_env(env_id, n_envs=1, seed=seed), gamma=kwargs["gamma"])
     model = ALGORITHMS[algo](env=env, seed=seed, device="cpu", **kwargs)
     start = time.process_time()
-    model.learn(total, callback=StopTrainingOnMaxEpisodes(episodes))
+    model.learn(total, callback=StopTrainingOnMaxEpisodes(episodes) if episodes is not None else None)
     seconds = time.process_time() - start
     returns = np.asarray(env.env_method("get_episode_rewards")[0][:episodes], dtype=float)
     return {
@@ -128,6 +138,32 @@ def done(out: Path) -> set[tuple[str, str, str, int]]:
     return {(a, e, o, int(s)) for a, e, o, s in table[["algo", "env", "optimizer", "seed"]].itertuples(index=False)}
 
 
+def measure_cost(algos: Sequence[str], env_ids: Sequence[str], seeds: Sequence[int], steps: int, out: Path) -> None:
+    """
+    The cost per env step, paired: for each seed a run of each optimizer for ``steps`` env steps, in this process one
+    after the other (ObGD first for even seeds, Adam first for odd ones), each appended to ``<out>/cost.csv`` as it
+    finishes (a pair recorded is not measured again).
+    """
+    path = out / "cost.csv"
+    recorded = set()
+    if path.exists():
+        table = pd.read_csv(path)
+        recorded = {(a, e, o, int(s)) for a, e, o, s in table[["algo", "env", "optimizer", "seed"]].itertuples(index=False)}
+    out.mkdir(parents=True, exist_ok=True)
+    for algo in algos:
+        for env_id in env_ids:
+            for seed in seeds:
+                order = ["obgd", "adam"] if seed % 2 == 0 else ["adam", "obgd"]
+                for optimizer in order:
+                    if (algo, env_id, optimizer, seed) in recorded:
+                        continue
+                    result = run(algo, env_id, optimizer, seed, episodes=None, steps=steps)
+                    row = {key: result[key] for key in ("algo", "env", "optimizer", "seed", "steps", "cpu_seconds")}
+                    pd.DataFrame([row]).to_csv(path, mode="a", header=not path.exists(), index=False)
+                    micros = 1e6 * result["cpu_seconds"] / result["steps"]
+                    print(f"cost: {algo} {env_id} {optimizer} seed {seed}: {micros:.0f} µs/step", flush=True)
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--algo", nargs="+", default=["nstep_sarsa"], choices=sorted(ALGORITHMS))
@@ -137,10 +173,15 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--optimizers", nargs="+", default=["obgd", "adam"], choices=["obgd", "adam"])
     parser.add_argument("--workers", type=int, default=1, help="runs in parallel, each on one torch thread")
     parser.add_argument("--out", type=Path, default=RESULTS / "streaming", help="where runs are recorded")
+    parser.add_argument(
+        "--cost", type=int, metavar="STEPS", help="measure the cost per env step instead: both optimizers, paired per seed"
+    )
     parser.add_argument("--report", action="store_true", help="only write the results page from the recorded runs")
     parser.add_argument("--page", type=Path, default=RESULTS / "streaming.md", help="the results page")
     args = parser.parse_args(argv)
-    if not args.report:
+    if args.cost is not None and not args.report:
+        measure_cost(args.algo, args.env, args.seeds, args.cost, args.out)
+    elif not args.report:
         recorded = done(args.out)
         jobs = [
             (algo, env_id, optimizer, seed, args.episodes)

@@ -136,6 +136,36 @@ def plot_curves(episodes: dict[tuple[str, str], pd.DataFrame], env_id: str, path
     plt.close(figure)
 
 
+def cost_table(cost: pd.DataFrame) -> pd.DataFrame:
+    """
+    :param cost: the paired cost runs (``python -m benchmarks.streaming --cost STEPS``)
+    :return: per algorithm and env, the µs per env step of each optimizer (median over seeds) and their ratio per seed
+        (only the seeds with both recorded), as strings
+    """
+    rows = []
+    for (algo, env_id), group in cost.groupby(["algo", "env"], sort=False):
+        micros = group.assign(micros=1e6 * group["cpu_seconds"] / group["steps"]).pivot_table(
+            index="seed", columns="optimizer", values="micros", aggfunc="last"
+        )
+        pairs = micros.dropna(subset=[column for column in OPTIMIZERS if column in micros])
+        if not set(OPTIMIZERS) <= set(pairs.columns) or pairs.empty:
+            continue
+        ratios = pairs["obgd"] / pairs["adam"]
+        rows.append(
+            {
+                "Algorithm": NAMES[algo],
+                "Env": env_id,
+                "Env steps per run": f"{int(group['steps'].median()):,}",
+                "Seeds (pairs)": len(pairs),
+                "µs per env step, ObGD (median)": f"{pairs['obgd'].median():,.0f}",
+                "µs per env step, Adam (median)": f"{pairs['adam'].median():,.0f}",
+                "ObGD / Adam per seed": ", ".join(f"{ratio:.2f}" for ratio in ratios),
+                "ObGD / Adam, median (range)": f"{ratios.median():.2f} ({ratios.min():.2f}–{ratios.max():.2f})",
+            }
+        )
+    return pd.DataFrame(rows)
+
+
 def _still_to_run(runs: pd.DataFrame) -> str:
     """:return: the sentence naming the planned runs not recorded yet (the commands above resume them)"""
     counts = runs.groupby(["algo", "env", "optimizer"]).size()
@@ -154,10 +184,12 @@ def write_report(out: Path, page: Path) -> None:
     :param page: the results page to write (its figures beside it, ``streaming-<env>.png``)
     """
     runs_path = out / "runs.csv"
-    if not runs_path.exists():
+    if not runs_path.exists() and not (out / "cost.csv").exists():
         print(f"no runs recorded in {out}")
         return
-    runs = pd.read_csv(runs_path).drop_duplicates(["algo", "env", "optimizer", "seed"], keep="last")
+    columns = ["algo", "env", "optimizer", "seed", "steps", "cpu_seconds", "episodes", "last_100", "first_at_level"]
+    runs = pd.read_csv(runs_path) if runs_path.exists() else pd.DataFrame(columns=columns)
+    runs = runs.drop_duplicates(["algo", "env", "optimizer", "seed"], keep="last")
     versions = code_versions("nstep_sarsa")
     lines = [
         "# Per-step deep RL: the streaming recipe",
@@ -206,5 +238,20 @@ def write_report(out: Path, page: Path) -> None:
         figure = page.parent / f"streaming-{env_id}.png"
         plot_curves(episodes, env_id, figure)
         lines += [f"![{env_id}: per-step learning curves]({figure.name})"]
+    cost_path = out / "cost.csv"
+    if cost_path.exists():
+        table = cost_table(pd.read_csv(cost_path))
+        if not table.empty:
+            lines += [
+                "",
+                "## Cost per env step, paired",
+                "",
+                "The µs per env step of the tables above come from long runs that shared the machine with others. Here "
+                "each seed's two runs (`python -m benchmarks.streaming --cost STEPS`: both optimizers, the same settings "
+                "as above, a fixed number of env steps from the start of training) ran one after the other in one process, "
+                "their order alternating from seed to seed, so that their ratio compares them on the same machine and load.",
+                "",
+                markdown_table(table),
+            ]
     page.write_text("\n".join(lines) + "\n")
     print(f"wrote {page}")

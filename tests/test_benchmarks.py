@@ -728,3 +728,27 @@ def test_the_streaming_benchmark_records_resumes_and_reports(tmp_path: Path, cap
     page = (tmp_path / "streaming.md").read_text()
     assert "| NStepSARSA (SARSA(λ)) | streaming recipe (ObGD) | 1 |" in page
     assert (tmp_path / "streaming-CartPole-v1.png").exists()
+
+
+def test_the_streaming_benchmarks_cost_is_paired_per_seed_and_resumes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from benchmarks import streaming
+
+    page = tmp_path / "streaming.md"
+    args = ["--algo", "nstep_sarsa", "--seeds", "0", "1", "--cost", "300", "--out", str(tmp_path), "--page", str(page)]
+    streaming.main(args)
+    cost = pd.read_csv(tmp_path / "cost.csv")
+    # Both optimizers per seed, the order alternating (ObGD first for seed 0, Adam first for seed 1)
+    assert list(zip(cost["seed"], cost["optimizer"], strict=True)) == [(0, "obgd"), (0, "adam"), (1, "adam"), (1, "obgd")]
+    assert (cost["steps"] == 300).all(), cost
+    capsys.readouterr()
+    streaming.main(args)
+    assert "cost:" not in capsys.readouterr().out
+    assert len(pd.read_csv(tmp_path / "cost.csv")) == 4
+    micros = 1e6 * cost["cpu_seconds"] / cost["steps"]
+    ratios = (micros[cost["optimizer"] == "obgd"].to_numpy() / micros[cost["optimizer"] == "adam"].to_numpy()).tolist()
+    text = page.read_text()
+    assert "## Cost per env step, paired" in text
+    assert "| NStepSARSA (SARSA(λ)) | CartPole-v1 | 300 | 2 |" in text, text
+    assert ", ".join(f"{ratio:.2f}" for ratio in ratios) in text, (ratios, text)
