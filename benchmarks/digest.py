@@ -40,6 +40,7 @@ from stable_baselines3.common.logger import KVWriter, Logger
 import sb3_classic.envs  # noqa: F401  (registers the book's envs)
 from benchmarks.lockstep import cpu_model, population_of
 from sb3_classic import REINFORCE, NStepSARSA, TileCoding
+from sb3_classic.common.obgd import ObGD
 from sb3_classic.common.on_policy_algorithm import ClassicOnPolicyAlgorithm
 
 SMALL_NET = dict(net_arch=[64, 64])
@@ -119,6 +120,21 @@ SARSA_ACROBOT_BATCH: dict[str, Any] = dict(
     policy_kwargs=SMALL_NET,
 )
 
+
+#: The streaming recipe's network (sparse initialisation, LayerNorm without parameters) under ObGD with a given κ
+def _streaming_net(kappa: float, **optimizer: Any) -> dict[str, Any]:
+    return dict(
+        net_arch=[64, 64],
+        activation_fn=th.nn.LeakyReLU,
+        layer_norm=True,
+        layer_norm_kwargs=dict(elementwise_affine=False),
+        weight_init="sparse",
+        optimizer_class=ObGD,
+        optimizer_kwargs=dict(kappa=kappa),
+        **optimizer,
+    )
+
+
 #: The configurations, each a model to train and its env steps: every update path of both algorithms
 CONFIGURATIONS: dict[str, Callable[[], tuple[ClassicOnPolicyAlgorithm, int]]] = {
     # Batched SARSA as on Acrobot: 8 envs, Expected SARSA's λ-returns, a bootstrap network and weight averaging
@@ -150,10 +166,37 @@ CONFIGURATIONS: dict[str, Callable[[], tuple[ClassicOnPolicyAlgorithm, int]]] = 
         policy="LinearPolicy",
         policy_kwargs=dict(features_extractor_class=TileCoding, features_extractor_kwargs=dict(n_tilings=8, tiles_per_dim=8)),
     ),
+    # SARSA(λ) along eligibility traces under ObGD (the streaming recipe), per step
+    "sarsa-lambda-obgd": lambda: _sarsa(
+        "CartPole-v1",
+        1,
+        1500,
+        n_steps=1,
+        update_mode="per_step",
+        train_freq=1,
+        gradient_steps=1,
+        td_lambda=0.8,
+        learning_rate=1.0,
+        policy_kwargs=_streaming_net(2.0),
+    ),
     # REINFORCE with a baseline: 1 env, 8 envs, and per step (§13.4's loop)
     "reinforce-1-env": lambda: _reinforce(1, 3000),
     "reinforce-8-envs": lambda: _reinforce(8, 4000, n_episodes=8),
     "reinforce-per-step": lambda: _reinforce(1, 1500, update_mode="per_step"),
+    # REINFORCE's per-step updates each bounded by ObGD (the streaming recipe)
+    "reinforce-per-step-obgd": lambda: (
+        REINFORCE(
+            "MlpPolicy",
+            make_vec_env("CartPole-v1", n_envs=1, seed=0),
+            seed=0,
+            device="cpu",
+            update_mode="per_step",
+            learning_rate=1.0,
+            value_learning_rate=1.0,
+            policy_kwargs=_streaming_net(3.0, value_optimizer_kwargs=dict(kappa=2.0)),
+        ),
+        1500,
+    ),
 }
 
 #: The seeds of a population's members

@@ -10,6 +10,7 @@ import torch as th
 from benchmarks import digest as digest_tool
 from benchmarks.lockstep import population_of
 from sb3_classic import NStepSARSA
+from sb3_classic.common.obgd import ObGD
 
 
 def one_ulp_up(value: float) -> float:
@@ -73,6 +74,11 @@ def test_the_configurations_cover_both_algorithms_and_both_update_modes() -> Non
     modes = {(type(model).__name__, model.update_mode) for model in built.values()}
     assert modes == {("NStepSARSA", "batch"), ("NStepSARSA", "per_step"), ("REINFORCE", "batch"), ("REINFORCE", "per_step")}
     assert {model.n_envs for model in built.values()} == {1, 8}
+    # ... and the streaming recipe's ObGD steps of both (SARSA(λ)'s traces, REINFORCE's bounded per-step updates)
+    assert {type(model).__name__ for model in built.values() if isinstance(model.policy.optimizer, ObGD)} == {
+        "NStepSARSA",
+        "REINFORCE",
+    }
 
 
 def test_the_populations_cover_both_algorithms_and_both_update_modes_in_lockstep() -> None:

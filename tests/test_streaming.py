@@ -27,8 +27,9 @@ from sb3_classic.zoo import YAML_NAMES
 GAMMA, LAMBDA = 0.9, 0.8
 
 
+@pytest.mark.parametrize("given", [False, True], ids=["grad", "step_with_gradients"])
 @pytest.mark.parametrize(("lr", "kappa", "bounded"), [(0.01, 2.0, False), (1.0, 2.0, True), (1.0, 0.0, False)])
-def test_obgd_step_is_its_formula(lr: float, kappa: float, bounded: bool) -> None:
+def test_obgd_step_is_its_formula(lr: float, kappa: float, bounded: bool, given: bool) -> None:
     weight = nn.Parameter(th.tensor([0.5, -1.0, 2.0]))
     bias = nn.Parameter(th.tensor(0.25))
     optimizer = ObGD([weight, bias], lr=lr, kappa=kappa)
@@ -38,8 +39,13 @@ def test_obgd_step_is_its_formula(lr: float, kappa: float, bounded: bool) -> Non
         ([0.2, -0.1, 0.3], 0.5, 0.7, 0.0),
         ([-0.4, 0.6, 0.1], -0.2, -1.5, GAMMA * LAMBDA),
     ):
-        weight.grad, bias.grad = th.tensor(grad_w), th.tensor(grad_b)
-        optimizer.step(td_error=td_error, trace_decay=decay)
+        if given:
+            optimizer.step_with_gradients([th.tensor(grad_w), th.tensor(grad_b)], td_error=td_error, trace_decay=decay)
+            assert weight.grad is None
+            assert bias.grad is None
+        else:
+            weight.grad, bias.grad = th.tensor(grad_w), th.tensor(grad_b)
+            optimizer.step(td_error=td_error, trace_decay=decay)
         # e ← γλe + ∇; δ̄ = max(|δ|, 1); M = ακδ̄‖e‖₁; w ← w + (α / max(M, 1)) δ e
         e_w, e_b = decay * e_w + np.array(grad_w), decay * e_b + grad_b
         bound = lr * kappa * max(abs(td_error), 1.0) * (np.abs(e_w).sum() + abs(e_b))
@@ -63,6 +69,41 @@ def test_obgd_refuses_a_loss_step_and_bad_arguments() -> None:
         optimizer.step()
     with pytest.raises(ValueError, match=r"trace_decay=1\.5"):
         optimizer.step(td_error=1.0, trace_decay=1.5)
+
+
+def test_obgd_steps_with_given_gradients_as_with_grad() -> None:
+    # The same arithmetic in the same order: equal to the bit on one machine; a None gradient leaves its parameter and
+    # trace as they were
+    def trained(given: bool) -> tuple[list[th.Tensor], list[th.Tensor]]:
+        th.manual_seed(0)
+        layer = nn.Linear(4, 2)
+        optimizer = ObGD([{"params": [layer.weight]}, {"params": [layer.bias], "kappa": 0.5}], lr=1.0)
+        for step in range(5):
+            inputs = th.randn(1, 4)
+            output = layer(inputs).sum()
+            restart = 0.0 if step == 0 else GAMMA * LAMBDA
+            if given:
+                gradients = th.autograd.grad(output, optimizer.parameter_list())
+                optimizer.step_with_gradients(gradients, td_error=2.0 - step, trace_decay=restart)
+            else:
+                optimizer.zero_grad()
+                output.backward()
+                optimizer.step(td_error=2.0 - step, trace_decay=restart)
+        traces = [optimizer.state[p]["eligibility_trace"] for p in optimizer.parameter_list()]
+        return [p.detach().clone() for p in layer.parameters()], traces
+
+    (weights_grad, traces_grad), (weights_given, traces_given) = trained(False), trained(True)
+    for a, b in zip([*weights_grad, *traces_grad], [*weights_given, *traces_given], strict=True):
+        assert th.equal(a, b), (a, b)
+
+    weight, bias = nn.Parameter(th.ones(2)), nn.Parameter(th.zeros(()))
+    optimizer = ObGD([weight, bias], lr=0.1)
+    optimizer.step_with_gradients([None, th.tensor(1.0)], td_error=1.0)
+    assert th.equal(weight.detach(), th.ones(2))
+    assert "eligibility_trace" not in optimizer.state[weight]
+    assert float(bias) == pytest.approx(0.1)
+    with pytest.raises(ValueError, match=r"1 gradients for the optimizer's 2 parameters"):
+        optimizer.step_with_gradients([th.ones(2)], td_error=1.0)
 
 
 def test_traces_restart_at_an_episode_start() -> None:

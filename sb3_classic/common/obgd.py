@@ -56,14 +56,13 @@ class ObGD(th.optim.Optimizer):
                 raise ValueError(f"ObGD({name}={value!r}): must be a finite number >= 0; {hint}")
         super().__init__(params, {"lr": lr, "kappa": kappa})
 
-    @th.no_grad()
     def step(  # type: ignore[override]
         self, closure: Callable[[], float] | None = None, *, td_error: float | None = None, trace_decay: float = 0.0
     ) -> None:
         r"""
         One step along the traces (see the class): :math:`\mathbf e \leftarrow \gamma\lambda \mathbf e + \nabla`, then
-        :math:`\mathbf w \leftarrow \mathbf w + \frac{\alpha}{\max(M, 1)} \delta \mathbf e`. A parameter without a
-        gradient (``.grad`` None) is left as it is, its trace too.
+        :math:`\mathbf w \leftarrow \mathbf w + \frac{\alpha}{\max(M, 1)} \delta \mathbf e`, with each parameter's
+        ``.grad`` as :math:`\nabla`. A parameter without a gradient (``.grad`` None) is left as it is, its trace too.
 
         :param closure: not supported (ObGD steps on one transition's TD error, given as ``td_error``)
         :param td_error: δ of the transition, e.g. :math:`R_{t+1} + \gamma \hat q(S_{t+1}, A_{t+1}) -
@@ -78,32 +77,63 @@ class ObGD(th.optim.Optimizer):
                 "transition, with each parameter's .grad the gradient of the prediction (∇q̂ or ∇v̂, not of a loss); it "
                 "takes no closure. NStepSARSA makes these steps itself with update_mode='per_step' and n_steps=1"
             )
+        self.step_with_gradients([p.grad for p in self.parameter_list()], td_error=td_error, trace_decay=trace_decay)
+
+    def parameter_list(self) -> list[th.Tensor]:
+        """:return: the parameters the optimizer holds, group after group, in the order ``step_with_gradients`` takes
+        their gradients"""
+        return [p for group in self.param_groups for p in group["params"]]
+
+    def step_with_gradients(self, gradients: Sequence[th.Tensor | None], *, td_error: float, trace_decay: float = 0.0) -> None:
+        r"""
+        ``step`` with the gradients given instead of read from ``.grad``: the algorithms' per-step updates take them
+        from ``torch.autograd.grad`` (``td_step``), which spares each env step the ``.grad`` round trip (``zero_grad``,
+        accumulation) and the hooks of ``Optimizer.step``. The same arithmetic, in the same order, as ``step``.
+
+        :param gradients: :math:`\nabla` of each parameter, in the order of ``parameter_list()``, each of its shape (None:
+            that parameter and its trace are left as they are)
+        :param td_error: δ of the transition (see ``step``)
+        :param trace_decay: γλ (see ``step``)
+        :raises ValueError: for a ``trace_decay`` outside [0, 1], or a number of gradients other than of parameters
+        """
         if not 0.0 <= trace_decay <= 1.0:
             raise ValueError(f"ObGD.step(trace_decay={trace_decay!r}): the decay γλ of the traces must be in [0, 1]")
+        gradients = list(gradients)
+        if len(gradients) != sum(len(group["params"]) for group in self.param_groups):
+            raise ValueError(
+                f"ObGD.step_with_gradients: {len(gradients)} gradients for the optimizer's "
+                f"{sum(len(group['params']) for group in self.param_groups)} parameters; give one per parameter of "
+                "parameter_list(), in its order (None for a parameter without one)"
+            )
         groups = []
         l1_norm = 0.0
-        for group in self.param_groups:
-            params = [p for p in group["params"] if p.grad is not None]
-            if not params:
-                continue
-            grads = [p.grad for p in params]
-            traces = [self._trace(p) for p in params]
-            if trace_decay == 0.0:
-                # e ← ∇ (a restart: 0 · e would keep a non-finite entry of the old trace as NaN)
-                th._foreach_copy_(traces, grads)
-            else:
-                # e ← γλ e + ∇ (S&B eq. 12.5)
-                th._foreach_mul_(traces, trace_decay)
-                th._foreach_add_(traces, grads)
-            l1_norm += sum(norm.item() for norm in th._foreach_norm(traces, 1))
-            groups.append((group, params, traces))
-        # δ̄ = max(|δ|, 1); M = α κ δ̄ ‖e‖₁ (the paper's bound on the step's overshoot, ‖e‖₁ over every parameter)
-        delta_bar = max(abs(td_error), 1.0)
-        for group, params, traces in groups:
-            bound = group["lr"] * group["kappa"] * delta_bar * l1_norm
-            step_size = group["lr"] / bound if bound > 1.0 else group["lr"]
-            # w ← w + (step) δ e (S&B eq. 12.7 with the bounded step)
-            th._foreach_add_(params, traces, alpha=step_size * td_error)
+        first = 0
+        with th.no_grad():
+            for group in self.param_groups:
+                group_gradients = gradients[first : first + len(group["params"])]
+                first += len(group["params"])
+                pairs = [(p, g) for p, g in zip(group["params"], group_gradients, strict=True) if g is not None]
+                if not pairs:
+                    continue
+                params = [p for p, _ in pairs]
+                grads = [g for _, g in pairs]
+                traces = [self._trace(p) for p in params]
+                if trace_decay == 0.0:
+                    # e ← ∇ (a restart: 0 · e would keep a non-finite entry of the old trace as NaN)
+                    th._foreach_copy_(traces, grads)
+                else:
+                    # e ← γλ e + ∇ (S&B eq. 12.5)
+                    th._foreach_mul_(traces, trace_decay)
+                    th._foreach_add_(traces, grads)
+                l1_norm += sum(norm.item() for norm in th._foreach_norm(traces, 1))
+                groups.append((group, params, traces))
+            # δ̄ = max(|δ|, 1); M = α κ δ̄ ‖e‖₁ (the paper's bound on the step's overshoot, ‖e‖₁ over every parameter)
+            delta_bar = max(abs(td_error), 1.0)
+            for group, params, traces in groups:
+                bound = group["lr"] * group["kappa"] * delta_bar * l1_norm
+                step_size = group["lr"] / bound if bound > 1.0 else group["lr"]
+                # w ← w + (step) δ e (S&B eq. 12.7 with the bounded step)
+                th._foreach_add_(params, traces, alpha=step_size * td_error)
 
     def _trace(self, parameter: th.Tensor) -> th.Tensor:
         """:return: the parameter's eligibility trace, zeros at first (made on its first step)"""
@@ -152,11 +182,11 @@ def td_step(
         )
     # δ_t = G_{t:t+1} − q̂(S_t, A_t, w) (S&B eq. 12.6; the target without gradient: semi-gradient)
     td_error = (target - prediction.detach()).item()
-    optimizer.zero_grad()
-    # ∇q̂(S_t, A_t, w) in each parameter's .grad
-    prediction.sum().backward()
+    # ∇q̂(S_t, A_t, w)
+    parameters = optimizer.parameter_list()
+    gradients = th.autograd.grad(prediction.sum(), parameters, allow_unused=True)
     # e ← γλe + ∇q̂ (e ← ∇q̂ at an episode's start); w ← w + (bounded step) δ e
-    optimizer.step(td_error=td_error, trace_decay=0.0 if restart else trace_decay)
+    optimizer.step_with_gradients(gradients, td_error=td_error, trace_decay=0.0 if restart else trace_decay)
     return prediction.detach().cpu().numpy(), 0.5 * td_error * td_error
 
 

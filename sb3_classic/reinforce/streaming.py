@@ -79,17 +79,16 @@ def reinforce_obgd_step(
             f"reinforce_obgd_step steps both networks with ObGD, not {type(policy_optimizer).__name__} and "
             f"{type(value_optimizer).__name__}: build the policy with optimizer_class=ObGD"
         )
-    policy_optimizer.zero_grad()
-    if value_optimizer is not None:
-        value_optimizer.zero_grad()
-    # ∇v̂(S_t, w) and ∇ln π(A_t|S_t, θ) in their parameters' .grad: the networks' parameters are disjoint (no shared
-    # features extractor), so one backward pass of the sum gives each network the gradient of its own output
-    (log_prob.sum() + values.sum()).backward()
+    policy_parameters = policy_optimizer.parameter_list()
+    value_parameters = value_optimizer.parameter_list() if value_optimizer is not None else []
+    # ∇ln π(A_t|S_t, θ) and ∇v̂(S_t, w): the networks' parameters are disjoint (no shared features extractor), so one
+    # backward pass of the sum gives each network the gradient of its own output
+    gradients = th.autograd.grad(log_prob.sum() + values.sum(), [*policy_parameters, *value_parameters], allow_unused=True)
     if value_optimizer is not None:
         # w ← w + (α^w / max(M^w, 1)) δ_t ∇v̂(S_t, w): ObGD with trace e = ∇v̂ (λ = 0; the paper's κ = 2)
-        value_optimizer.step(td_error=td_error, trace_decay=0.0)
+        value_optimizer.step_with_gradients(gradients[len(policy_parameters) :], td_error=td_error, trace_decay=0.0)
     # θ ← θ + (α^θ / max(M^θ, 1)) γ^t δ_t ∇ln π(A_t|S_t, θ): ObGD with trace e = ∇ln π (λ = 0; the paper's actor κ = 3)
-    policy_optimizer.step(td_error=policy_error, trace_decay=0.0)
+    policy_optimizer.step_with_gradients(gradients[: len(policy_parameters)], td_error=policy_error, trace_decay=0.0)
     # (the distribution holds this step's graph: dropped, as REINFORCE's other gradient steps drop it)
     policy.release_distributions()
     return dict(
