@@ -80,8 +80,10 @@ class ObGD(th.optim.Optimizer):
         self.step_with_gradients([p.grad for p in self.parameter_list()], td_error=td_error, trace_decay=trace_decay)
 
     def parameter_list(self) -> list[th.Tensor]:
-        """:return: the parameters the optimizer holds, group after group, in the order ``step_with_gradients`` takes
-        their gradients"""
+        """
+        :return: the parameters the optimizer holds, group after group: the order in which ``step_with_gradients``
+            takes their gradients
+        """
         return [p for group in self.param_groups for p in group["params"]]
 
     def step_with_gradients(self, gradients: Sequence[th.Tensor | None], *, td_error: float, trace_decay: float = 0.0) -> None:
