@@ -3,11 +3,13 @@ NStepSARSA or REINFORCE per step with the streaming recipe (the entries of ``hyp
 SARSA(λ) along eligibility traces under ObGD, and ``hyperparams/reinforce_streaming.yml``: the book's per-step updates
 each bounded by ObGD; sparse initialisation, LayerNorm without parameters, SB3's VecNormalize) against the same network,
 initialisation and normalisation with Adam (SARSA: on the one-step squared TD error), over seeds, a fixed number of
-episodes each (SARSA: ε linear from 1 to 0.01 over the first 20k env steps). One env, torch 1 thread per run.
+episodes each (SARSA: ε linear from 1 to 0.01 over the entry's first ``exploration_fraction`` × ``n_timesteps`` env
+steps). One env, torch 1 thread per run.
 
-Each finished run appends its episode returns to ``<out>/<algo>-<env>.csv`` and its summary to ``<out>/runs.csv``; a run
-found there is not run again, so an interrupted benchmark resumes where it stopped. ``--report`` writes the results page
-(``benchmarks/results/streaming.md``) and a figure per env from what is recorded.
+Each finished run appends its episode returns to ``<out>/<algo>-<env>.csv`` and its summary to ``<out>/runs.csv``, with
+a key of its settings (the YAML entry as written, the optimizer); a run found there under today's key is not run again,
+so an interrupted benchmark resumes where it stopped, and a changed YAML entry is run anew. ``--report`` writes the
+results page (``benchmarks/results/streaming.md``) and a figure per env from what is recorded.
 
 ``--cost STEPS`` measures the cost per env step instead, paired: for each seed, a run of each optimizer for STEPS env
 steps, one after the other in this process (their order alternating from seed to seed), so that both see the same
@@ -20,6 +22,8 @@ machine and load; the page gives the ratio per seed (``<out>/cost.csv``, resumab
 """
 
 import argparse
+import hashlib
+import json
 import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -46,17 +50,40 @@ HYPERPARAMS = Path(__file__).resolve().parent.parent / "hyperparams"
 RESULTS = Path(__file__).resolve().parent / "results"
 #: The level a run's 100-episode mean is timed to, per env (the zoo's thresholds; the seed report's −100 on Acrobot-v1)
 LEVELS = {"CartPole-v1": 475.0, "Acrobot-v1": -100.0, "LunarLander-v3": 200.0}
-#: Env steps over which ε goes from 1 to its final value
-EXPLORATION_STEPS = 20_000
 #: Adam's step size per step (the same network otherwise)
 ADAM_LEARNING_RATE = 5e-4
+#: The columns of ``runs.csv`` before the settings' key
+RUN_COLUMNS = ["algo", "env", "optimizer", "seed", "steps", "cpu_seconds", "episodes", "last_100", "first_at_level"]
 #: Episodes of the moving mean (the last-100-episode mean, as the zoo's and the seed report's)
 WINDOW = 100
 
 
+def yaml_entry(algo: str, env_id: str) -> dict[str, Any]:
+    """:return: the streaming YAML's entry of ``env_id``, as written"""
+    return dict(yaml.safe_load((HYPERPARAMS / f"{algo}_streaming.yml").read_text())[env_id])
+
+
+def exploration_steps(algo: str, env_id: str) -> int | None:
+    """:return: the env steps over which the YAML entry's ε goes from its initial value to its final one
+    (``exploration_fraction`` of ``n_timesteps``), None for REINFORCE"""
+    entry = yaml_entry(algo, env_id)
+    if "exploration_fraction" not in entry:
+        return None
+    return round(float(entry["exploration_fraction"]) * float(entry["n_timesteps"]))
+
+
+def settings_key(algo: str, env_id: str, optimizer: str) -> str:
+    """:return: a digest of what a run's settings come from (the YAML entry as written, the optimizer, Adam's step
+    size): a recorded run counts only while its key is the current one, so that a changed entry is run anew"""
+    content: dict[str, Any] = {"entry": yaml_entry(algo, env_id), "optimizer": optimizer}
+    if optimizer == "adam":
+        content["adam_learning_rate"] = ADAM_LEARNING_RATE
+    return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()[:12]
+
+
 def settings(algo: str, env_id: str, optimizer: str) -> dict[str, Any]:
     """:return: the YAML entry's constructor arguments, with Adam in place of ObGD for ``optimizer="adam"``"""
-    entry = dict(yaml.safe_load((HYPERPARAMS / f"{algo}_streaming.yml").read_text())[env_id])
+    entry = yaml_entry(algo, env_id)
     for key in ("n_timesteps", "n_envs", "normalize"):
         entry.pop(key)
     entry["policy_kwargs"] = eval(entry["policy_kwargs"], {"nn": nn, "th": th, "ObGD": ObGD})
@@ -77,12 +104,13 @@ def run(algo: str, env_id: str, optimizer: str, seed: int, episodes: int | None,
     """
     th.set_num_threads(1)
     kwargs = settings(algo, env_id, optimizer)
-    # A bound on the env steps (the callback stops at the episode count); ε decays over the first EXPLORATION_STEPS
+    # A bound on the env steps (the callback stops at the episode count); ε decays over the YAML entry's env steps
     max_episode_steps = gym.spec(env_id).max_episode_steps or 1000
-    total = max(episodes * max_episode_steps, 2 * EXPLORATION_STEPS) if episodes is not None else steps
+    decay = exploration_steps(algo, env_id)
+    total = max(episodes * max_episode_steps, 2 * (decay or 0)) if episodes is not None else steps
     assert total is not None, "run() takes episodes or steps"
-    if algo == "nstep_sarsa":
-        kwargs["exploration_fraction"] = min(1.0, EXPLORATION_STEPS / total)
+    if decay is not None:
+        kwargs["exploration_fraction"] = min(1.0, decay / total)
     env = VecNormalize(make_vec_env(env_id, n_envs=1, seed=seed), gamma=kwargs["gamma"])
     model = ALGORITHMS[algo](env=env, seed=seed, device="cpu", **kwargs)
     start = time.process_time()
@@ -125,16 +153,26 @@ def record(result: dict[str, Any], out: Path) -> None:
     last, first = summary(returns, LEVELS[result["env"]])
     row = {key: result[key] for key in ("algo", "env", "optimizer", "seed", "steps", "cpu_seconds")}
     row.update(episodes=len(returns), last_100=round(last, 2), first_at_level=first or "")
+    row.update(settings=settings_key(result["algo"], result["env"], result["optimizer"]))
     runs = out / "runs.csv"
     pd.DataFrame([row]).to_csv(runs, mode="a", header=not runs.exists(), index=False)
 
 
+def current_runs(out: Path) -> pd.DataFrame:
+    """:return: the runs recorded in ``out`` under today's settings (``settings_key``), the last of any repeated one"""
+    path = out / "runs.csv"
+    if not path.exists():
+        return pd.DataFrame(columns=[*RUN_COLUMNS, "settings"])
+    table = pd.read_csv(path)
+    groups = list(table[["algo", "env", "optimizer"]].itertuples(index=False, name=None))
+    keys = {group: settings_key(*group) for group in set(groups)}
+    current = [keys[group] == key for group, key in zip(groups, table["settings"], strict=True)]
+    return table[current].drop_duplicates(["algo", "env", "optimizer", "seed"], keep="last")
+
+
 def done(out: Path) -> set[tuple[str, str, str, int]]:
-    """:return: the (algo, env, optimizer, seed) runs recorded in ``out``"""
-    runs = out / "runs.csv"
-    if not runs.exists():
-        return set()
-    table = pd.read_csv(runs)
+    """:return: the (algo, env, optimizer, seed) runs recorded in ``out`` under today's settings"""
+    table = current_runs(out)
     return {(a, e, o, int(s)) for a, e, o, s in table[["algo", "env", "optimizer", "seed"]].itertuples(index=False)}
 
 

@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from benchmarks.report import markdown_table
-from benchmarks.streaming import LEVELS, NAMES, RESULTS, WINDOW
+from benchmarks.streaming import LEVELS, NAMES, RESULTS, WINDOW, current_runs, exploration_steps
 from sb3_classic.harness.common import code_versions
 
 #: The batch entries' results (``python -m benchmarks.run``), per env
@@ -187,9 +187,7 @@ def write_report(out: Path, page: Path) -> None:
     if not runs_path.exists() and not (out / "cost.csv").exists():
         print(f"no runs recorded in {out}")
         return
-    columns = ["algo", "env", "optimizer", "seed", "steps", "cpu_seconds", "episodes", "last_100", "first_at_level"]
-    runs = pd.read_csv(runs_path) if runs_path.exists() else pd.DataFrame(columns=columns)
-    runs = runs.drop_duplicates(["algo", "env", "optimizer", "seed"], keep="last")
+    runs = current_runs(out)
     versions = code_versions("nstep_sarsa")
     lines = [
         "# Per-step deep RL: the streaming recipe",
@@ -208,7 +206,9 @@ def write_report(out: Path, page: Path) -> None:
         "κ = 3 for the policy, 2 for v̂); 2×128 LeakyReLU networks with sparse initialisation and LayerNorm without "
         "parameters; SB3's `VecNormalize` (observations, and rewards by the running std of the discounted return); one "
         "env, one update per env step (REINFORCE: the episode's per-step updates at its end); NStepSARSA's ε linear from "
-        "1 to 0.01 over the first 20,000 env steps.",
+        "1 to 0.01 over the first env steps of its YAML entry (`exploration_fraction` of `n_timesteps`: "
+        + ", ".join(f"{env_id} {exploration_steps('nstep_sarsa', env_id):,}" for env_id in LEVELS)
+        + "). A run counts while its YAML entry is as it was run (`runs.csv`'s `settings`); a changed one is run anew.",
         "- *Adam per step*: the same network, initialisation and normalisation with Adam (step size 5e-4; SARSA on the "
         "one-step squared TD error, REINFORCE's per-step updates of the same box).",
         "- 1,000 episodes per run, seeds 0–9; the return is the env's (before `VecNormalize`'s scaling).",
@@ -226,7 +226,9 @@ def write_report(out: Path, page: Path) -> None:
         episodes = {}
         for (algo, optimizer), _ in runs[runs["env"] == env_id].groupby(["algo", "optimizer"], sort=False):
             frame = pd.read_csv(out / f"{algo}-{env_id}.csv")
-            frame = frame[frame["optimizer"] == optimizer].drop_duplicates(["seed", "episode"], keep="last")
+            seeds = runs[(runs["algo"] == algo) & (runs["env"] == env_id) & (runs["optimizer"] == optimizer)]["seed"]
+            frame = frame[(frame["optimizer"] == optimizer) & frame["seed"].isin(seeds)]
+            frame = frame.drop_duplicates(["seed", "episode"], keep="last")
             episodes[(algo, optimizer)] = frame
         table = streaming_table(runs, episodes, env_id)
         if table.empty:

@@ -728,6 +728,12 @@ def test_the_streaming_benchmark_records_resumes_and_reports(tmp_path: Path, cap
     page = (tmp_path / "streaming.md").read_text()
     assert "| NStepSARSA (SARSA(λ)) | streaming recipe (ObGD) | 1 |" in page
     assert (tmp_path / "streaming-CartPole-v1.png").exists()
+    # A run recorded under other settings (its YAML entry changed since) does not count: it is run anew
+    runs["settings"] = ["0" * 12, runs["settings"][1]]
+    runs.to_csv(tmp_path / "runs.csv", index=False)
+    streaming.main([*args, str(tmp_path / "streaming.md")])
+    assert "1 runs to do (1 recorded" in capsys.readouterr().out
+    assert len(streaming.current_runs(tmp_path)) == 2
 
 
 def test_the_streaming_benchmarks_cost_is_paired_per_seed_and_resumes(
