@@ -172,7 +172,11 @@ def current_runs(out: Path) -> pd.DataFrame:
 
 def done(out: Path) -> set[tuple[str, str, str, int]]:
     """:return: the (algo, env, optimizer, seed) runs recorded in ``out`` under today's settings"""
-    table = current_runs(out)
+    return _keys(current_runs(out))
+
+
+def _keys(table: pd.DataFrame) -> set[tuple[str, str, str, int]]:
+    """:return: the (algo, env, optimizer, seed) of each row of a table of runs"""
     return {(a, e, o, int(s)) for a, e, o, s in table[["algo", "env", "optimizer", "seed"]].itertuples(index=False)}
 
 
@@ -183,10 +187,7 @@ def measure_cost(algos: Sequence[str], env_ids: Sequence[str], seeds: Sequence[i
     finishes (a pair recorded is not measured again).
     """
     path = out / "cost.csv"
-    recorded = set()
-    if path.exists():
-        table = pd.read_csv(path)
-        recorded = {(a, e, o, int(s)) for a, e, o, s in table[["algo", "env", "optimizer", "seed"]].itertuples(index=False)}
+    recorded = _keys(pd.read_csv(path)) if path.exists() else set()
     out.mkdir(parents=True, exist_ok=True)
     for algo in algos:
         for env_id in env_ids:

@@ -147,8 +147,10 @@ def cost_table(cost: pd.DataFrame) -> pd.DataFrame:
         micros = group.assign(micros=1e6 * group["cpu_seconds"] / group["steps"]).pivot_table(
             index="seed", columns="optimizer", values="micros", aggfunc="last"
         )
-        pairs = micros.dropna(subset=[column for column in OPTIMIZERS if column in micros])
-        if not set(OPTIMIZERS) <= set(pairs.columns) or pairs.empty:
+        if not set(OPTIMIZERS) <= set(micros.columns):
+            continue
+        pairs = micros.dropna(subset=list(OPTIMIZERS))
+        if pairs.empty:
             continue
         ratios = pairs["obgd"] / pairs["adam"]
         rows.append(

@@ -101,10 +101,11 @@ class ObGD(th.optim.Optimizer):
         if not 0.0 <= trace_decay <= 1.0:
             raise ValueError(f"ObGD.step(trace_decay={trace_decay!r}): the decay γλ of the traces must be in [0, 1]")
         gradients = list(gradients)
-        if len(gradients) != sum(len(group["params"]) for group in self.param_groups):
+        n_parameters = sum(len(group["params"]) for group in self.param_groups)
+        if len(gradients) != n_parameters:
             raise ValueError(
-                f"ObGD.step_with_gradients: {len(gradients)} gradients for the optimizer's "
-                f"{sum(len(group['params']) for group in self.param_groups)} parameters; give one per parameter of "
+                f"ObGD.step_with_gradients: {len(gradients)} gradients for the optimizer's {n_parameters} parameters; "
+                "give one per parameter of "
                 "parameter_list(), in its order (None for a parameter without one)"
             )
         groups = []
