@@ -3,8 +3,8 @@ NStepSARSA or REINFORCE per step with the streaming recipe (the entries of ``hyp
 SARSA(λ) along eligibility traces under ObGD, and ``hyperparams/reinforce_streaming.yml``: the book's per-step updates
 each bounded by ObGD; sparse initialisation, LayerNorm without parameters, SB3's VecNormalize) against the same network,
 initialisation and normalisation with Adam (SARSA: on the one-step squared TD error), over seeds, a fixed number of
-episodes each (SARSA: ε linear from 1 to 0.01 over the entry's first ``exploration_fraction`` × ``n_timesteps`` env
-steps). One env, torch 1 thread per run.
+episodes each (SARSA: ε as the entry says; a linear ε over the entry's first ``exploration_fraction`` ×
+``n_timesteps`` env steps). One env, torch 1 thread per run.
 
 Each finished run appends its episode returns to ``<out>/<algo>-<env>.csv`` and its summary to ``<out>/runs.csv``, with
 a key of its settings (the YAML entry as written, the optimizer); a run found there under today's key is not run again,
@@ -70,6 +70,22 @@ def exploration_steps(algo: str, env_id: str) -> int | None:
     if "exploration_fraction" not in entry:
         return None
     return round(float(entry["exploration_fraction"]) * float(entry["n_timesteps"]))
+
+
+def describe_entry(algo: str, env_id: str) -> str:
+    """:return: the YAML entry's network and (SARSA) ε schedule in words, e.g. ``2×128 ReLU, ε ← 0.99 ε per episode
+    from 1 to 0``"""
+    entry = yaml_entry(algo, env_id)
+    kwargs = eval(entry["policy_kwargs"], {"nn": nn, "th": th, "ObGD": ObGD})
+    net = kwargs.get("net_arch", [])
+    layers = f"{len(net)}×{net[0]}" if len(set(net)) == 1 else "–".join(map(str, net))
+    words = f"{layers} {kwargs['activation_fn'].__name__}"
+    if "exploration_schedule" not in entry:
+        return words
+    start, end = entry["exploration_initial_eps"], entry["exploration_final_eps"]
+    if entry["exploration_schedule"] == "exponential":
+        return f"{words}, ε ← {entry['exploration_decay_rate']} ε at each episode's end, from {start} to {end}"
+    return f"{words}, ε linear from {start} to {end} over the first {exploration_steps(algo, env_id):,} env steps"
 
 
 def settings_key(algo: str, env_id: str, optimizer: str) -> str:
@@ -158,9 +174,10 @@ def record(result: dict[str, Any], out: Path) -> None:
     pd.DataFrame([row]).to_csv(runs, mode="a", header=not runs.exists(), index=False)
 
 
-def current_runs(out: Path) -> pd.DataFrame:
-    """:return: the runs recorded in ``out`` under today's settings (``settings_key``), the last of any repeated one"""
-    path = out / "runs.csv"
+def current_runs(out: Path, name: str = "runs.csv") -> pd.DataFrame:
+    """:return: the runs recorded in ``out / name`` (``runs.csv``, or ``cost.csv``) under today's settings
+    (``settings_key``), the last of any repeated one"""
+    path = out / name
     if not path.exists():
         return pd.DataFrame(columns=[*RUN_COLUMNS, "settings"])
     table = pd.read_csv(path)
@@ -184,10 +201,10 @@ def measure_cost(algos: Sequence[str], env_ids: Sequence[str], seeds: Sequence[i
     """
     The cost per env step, paired: for each seed a run of each optimizer for ``steps`` env steps, in this process one
     after the other (ObGD first for even seeds, Adam first for odd ones), each appended to ``<out>/cost.csv`` as it
-    finishes (a pair recorded is not measured again).
+    finishes, with its settings' key (a pair recorded under today's settings is not measured again).
     """
     path = out / "cost.csv"
-    recorded = _keys(pd.read_csv(path)) if path.exists() else set()
+    recorded = _keys(current_runs(out, "cost.csv"))
     out.mkdir(parents=True, exist_ok=True)
     for algo in algos:
         for env_id in env_ids:
@@ -198,6 +215,7 @@ def measure_cost(algos: Sequence[str], env_ids: Sequence[str], seeds: Sequence[i
                         continue
                     result = run(algo, env_id, optimizer, seed, episodes=None, steps=steps)
                     row = {key: result[key] for key in ("algo", "env", "optimizer", "seed", "steps", "cpu_seconds")}
+                    row.update(settings=settings_key(algo, env_id, optimizer))
                     pd.DataFrame([row]).to_csv(path, mode="a", header=not path.exists(), index=False)
                     micros = 1e6 * result["cpu_seconds"] / result["steps"]
                     print(f"cost: {algo} {env_id} {optimizer} seed {seed}: {micros:.0f} µs/step", flush=True)

@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from benchmarks.report import markdown_table
-from benchmarks.streaming import LEVELS, NAMES, RESULTS, WINDOW, current_runs, exploration_steps
+from benchmarks.streaming import LEVELS, NAMES, RESULTS, WINDOW, current_runs, describe_entry
 from sb3_classic.harness.common import code_versions
 
 #: The batch entries' results (``python -m benchmarks.run``), per env
@@ -31,6 +31,8 @@ PLANNED = [
     ("nstep_sarsa", "LunarLander-v3", "obgd"),
 ]
 SEEDS = 10
+#: The YAML entries the page describes: those of the planned runs
+ENTRIES = list(dict.fromkeys((algo, env_id) for algo, env_id, _ in PLANNED))
 COLORS = {
     ("nstep_sarsa", "obgd"): "C0",
     ("nstep_sarsa", "adam"): "C9",
@@ -205,12 +207,11 @@ def write_report(out: Path, page: Path) -> None:
         "",
         "- Settings: `hyperparams/nstep_sarsa_streaming.yml` (SARSA(λ), λ = 0.8, along eligibility traces under ObGD, "
         "α = 1, κ = 2) and `hyperparams/reinforce_streaming.yml` (the per-step updates of S&B §13.4 each bounded by ObGD, "
-        "κ = 3 for the policy, 2 for v̂); 2×128 LeakyReLU networks with sparse initialisation and LayerNorm without "
-        "parameters; SB3's `VecNormalize` (observations, and rewards by the running std of the discounted return); one "
-        "env, one update per env step (REINFORCE: the episode's per-step updates at its end); NStepSARSA's ε linear from "
-        "1 to 0.01 over the first env steps of its YAML entry (`exploration_fraction` of `n_timesteps`: "
-        + ", ".join(f"{env_id} {exploration_steps('nstep_sarsa', env_id):,}" for env_id in LEVELS)
-        + "). A run counts while its YAML entry is as it was run (`runs.csv`'s `settings`); a changed one is run anew.",
+        "κ = 3 for the policy, 2 for v̂); networks with sparse initialisation and LayerNorm without parameters; SB3's "
+        "`VecNormalize` (observations, and rewards by the running std of the discounted return); one env, one update per "
+        "env step (REINFORCE: the episode's per-step updates at its end). Per entry: "
+        + "; ".join(f"{NAMES[algo].split(' ')[0]} {env_id}: {describe_entry(algo, env_id)}" for algo, env_id in ENTRIES)
+        + ". A run counts while its YAML entry is as it was run (`runs.csv`'s `settings`); a changed one is run anew.",
         "- *Adam per step*: the same network, initialisation and normalisation with Adam (step size 5e-4; SARSA on the "
         "one-step squared TD error, REINFORCE's per-step updates of the same box).",
         "- 1,000 episodes per run, seeds 0–9; the return is the env's (before `VecNormalize`'s scaling).",
@@ -242,9 +243,8 @@ def write_report(out: Path, page: Path) -> None:
         figure = page.parent / f"streaming-{env_id}.png"
         plot_curves(episodes, env_id, figure)
         lines += [f"![{env_id}: per-step learning curves]({figure.name})"]
-    cost_path = out / "cost.csv"
-    if cost_path.exists():
-        table = cost_table(pd.read_csv(cost_path))
+    if (out / "cost.csv").exists():
+        table = cost_table(current_runs(out, "cost.csv"))
         if not table.empty:
             lines += [
                 "",

@@ -758,3 +758,12 @@ def test_the_streaming_benchmarks_cost_is_paired_per_seed_and_resumes(
     assert "## Cost per env step, paired" in text
     assert "| NStepSARSA (SARSA(λ)) | CartPole-v1 | 300 | 2 |" in text, text
     assert ", ".join(f"{ratio:.2f}" for ratio in ratios) in text, (ratios, text)
+    # A pair measured under other settings (its YAML entry changed since) is left out and measured anew
+    cost.loc[cost["seed"] == 1, "settings"] = "0" * 12
+    cost.to_csv(tmp_path / "cost.csv", index=False)
+    streaming.main(args)
+    assert capsys.readouterr().out.count("cost:") == 2
+    current = streaming.current_runs(tmp_path, "cost.csv")
+    pairs = sorted(zip(current["seed"], current["optimizer"], strict=True))
+    assert pairs == [(0, "adam"), (0, "obgd"), (1, "adam"), (1, "obgd")], current
+    assert (current["settings"] != "0" * 12).all(), current
