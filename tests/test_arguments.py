@@ -38,6 +38,13 @@ REFUSED_INPUTS = [
     # The other algorithm's argument was taken for a misspelling ("did you mean 'learning_rate'?" alone)
     (NStepSARSA, dict(value_learning_rate=0.1), TypeError, "argument of REINFORCE, not of NStepSARSA; did you mean 'lea"),
     (REINFORCE, dict(td_lambda=0.5), TypeError, "'td_lambda': it is an argument of NStepSARSA, not of REINFORCE; REINFO"),
+    # The policy's and ObGD's arguments given to the algorithm say where they belong; PyTorch's and the book's step size
+    (NStepSARSA, dict(net_arch=[32]), TypeError, "argument of the policy: pass policy_kwargs=dict(net_arch=...)"),
+    (REINFORCE, dict(value_optimizer_kwargs={}), TypeError, "pass policy_kwargs=dict(value_optimizer_kwargs=...)"),
+    (NStepSARSA, dict(kappa=2.0), TypeError, "ObGD's: pass policy_kwargs=dict(optimizer_class=ObGD, optimizer_kw"),
+    (NStepSARSA, dict(lr=0.1), TypeError, "'lr': did you mean 'learning_rate'?"),
+    (REINFORCE, dict(alpha=0.1), TypeError, "'alpha': did you mean 'learning_rate'?"),
+    (NStepSARSA, dict(policy_kwargs=dict(optimizer_class="ObGD")), TypeError, "optimizer_class='ObGD'): give the opt"),
     # (A2C's and PPO's rollout length: REINFORCE's own arguments are listed, n_episodes among them)
     (REINFORCE, dict(n_steps=5), TypeError, "not of REINFORCE; REINFORCE takes policy, env, learning_rate, value_learning"),
     # SB3's form before 1.8 with shared layers, which A2C cannot convert either: the error says what to write instead

@@ -18,6 +18,7 @@ from stable_baselines3.common.utils import set_random_seed
 from stable_baselines3.common.vec_env import DummyVecEnv
 from torch import nn
 
+import sb3_classic
 from sb3_classic import REINFORCE, NStepSARSA
 from sb3_classic.common.obgd import ObGD, td_step
 from sb3_classic.common.torch_layers import sparse_init
@@ -243,6 +244,25 @@ def test_the_recipes_network() -> None:
 def test_settings_obgd_cannot_train_are_refused(kwargs: dict[str, Any], match: str) -> None:
     with pytest.raises(ValueError, match=match):
         streaming_model("CartPole-v1", **kwargs)
+
+
+def test_every_setting_obgd_cannot_train_is_named_at_once() -> None:
+    # The defaults are a batch learner's: one error names the three settings to change, each with its fix
+    with pytest.raises(ValueError, match="update_mode='batch' with optimizer_class=ObGD") as refused:
+        NStepSARSA("MlpPolicy", "CartPole-v1", policy_kwargs=dict(optimizer_class=ObGD))
+    for fix in ("pass update_mode='per_step'", "pass n_steps=1", "pass gradient_steps=1"):
+        assert fix in str(refused.value), str(refused.value)
+    with pytest.raises(ValueError, match="update_mode='batch' with optimizer_class=ObGD") as refused:
+        REINFORCE("MlpPolicy", "CartPole-v1", max_grad_norm=0.5, policy_kwargs=dict(optimizer_class=ObGD))
+    for fix in ("pass update_mode='per_step'", "drop max_grad_norm"):
+        assert fix in str(refused.value), str(refused.value)
+
+
+def test_obgds_unknown_arguments_name_where_lambda_and_gamma_go() -> None:
+    # The paper's code gives the optimizer λ and γ; here they are the algorithm's
+    with pytest.raises(TypeError, match=r"'lamda', 'gamma': it takes lr \(α\) and kappa \(κ\).*td_lambda"):
+        ObGD([nn.Parameter(th.ones(2))], lamda=0.8, gamma=0.99)
+    assert sb3_classic.ObGD is ObGD
 
 
 def test_obgd_with_several_envs_is_refused() -> None:

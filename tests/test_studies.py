@@ -148,6 +148,30 @@ def test_readings_reinterpret_the_settings_a_variant_has_or_the_study_leaves_uns
     assert study.runs()[2].spec.label == "study n1 [halved] seed 0"
 
 
+def test_a_study_file_without_its_budget_or_claim_names_both(tmp_path: Path) -> None:
+    text = TINY.replace("budget: {episodes: 6}\n", "").split("claim:")[0]
+    with pytest.raises(StudyError) as refused:
+        load_study(write_study(tmp_path, text))
+    assert "budget: missing" in str(refused.value), str(refused.value)
+    assert "claim: give exactly one of `claim:`" in str(refused.value), str(refused.value)
+
+
+def test_a_number_varied_as_a_string_names_its_variant_as_once_fixed(tmp_path: Path) -> None:
+    # The claim's suggestion must be the name the variant has once the value is written as a number
+    text = TINY.replace("variants:\n  n1: {n_steps: 1}\n  n3: {n_steps: 3, policy_kwargs: {net_arch: [8]}}\n", "")
+    text = text.replace("  learning_rate: !!float 1e-3\n", "")
+    text = text.replace("claim: {", "vary: {learning_rate: [1e-3, 1e-4]}\nclaim: {")
+    with pytest.raises(StudyError) as refused:
+        load_study(write_study(tmp_path, text))
+    assert "'learning_rate=0.001', 'learning_rate=0.0001'" in str(refused.value), str(refused.value)
+    fixed = text.replace("[1e-3, 1e-4]", "[!!float 1e-3, !!float 1e-4]")
+    fixed = fixed.replace("variant: n3, others: [n1]", "variant: learning_rate=0.001, others: [learning_rate=0.0001]")
+    assert list(load_study(write_study(tmp_path, fixed)).variants) == [
+        "learning_rate=0.001",
+        "learning_rate=0.0001",
+    ]
+
+
 @pytest.mark.parametrize(
     ("change", "expected"),
     [
@@ -176,6 +200,11 @@ def test_readings_reinterpret_the_settings_a_variant_has_or_the_study_leaves_uns
         (("budget: {episodes: 6}", "budget: {episode: 6}"), ["budget: {'episode': 6} ('episode': did you mean 'episodes'?)"]),
         (("budget: {episodes: 6}", "budget: {episodes: 6, steps: 100}"), ["budget: give episodes or steps, not both"]),
         (("{text:", "{txt:"), ["claim.txt: unknown field: did you mean 'text'?", "claim.text: missing: the claim"]),
+        # A misspelt top-level field is said with the file's other problems, not alone before them
+        (
+            ("seeds: 2\nbudget: {episodes: 6}", "seed: 2\nbudget: {episodes: -6}"),
+            ["seed: unknown field: did you mean 'seeds'?", "budget.episodes: -6 is not a positive integer"],
+        ),
         # Each was taken: outputs written outside the results folder (or as hidden files), a seed `True`, a margin of
         # `true` (1), a threshold of .nan, a level of .inf, and the zoo's "multiple values for keyword argument 'seed'"
         (("title: Tiny", "study: ../escaped/name\ntitle: Tiny"), ["study: '../escaped/name': the name of the study's output"]),
@@ -995,6 +1024,27 @@ def test_a_budget_in_steps_shows_each_variants_fewest_and_most_episodes(tmp_path
     assert "| `n1` | 2 | 6 |" in page
     assert "count as the episode budget, a lower bound" in page
     assert "A budget in env steps" not in page
+
+
+def test_the_console_says_why_too_few_seeds_give_no_verdict(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # (the page's intervals say it; the console said "too close to call" alone)
+    study_file, cache, results = fake_cache(tmp_path)
+    studies_cli.main([str(study_file), "--report-only", "--cache-dir", str(cache), "--results-dir", str(results)])
+    output = capsys.readouterr().out
+    assert "too close to call: n = 3 beats n = 1\n  2 seeds per variant: a verdict needs at least 5" in output, output
+
+
+def test_the_error_rates_are_linked_where_they_lie_beside_the_results(tmp_path: Path) -> None:
+    # A results folder of one's own has no error-control.md beside it: the link would be broken
+    study_file, cache, results = fake_cache(tmp_path)
+    command = [str(study_file), "--report-only", "--cache-dir", str(cache), "--results-dir", str(results)]
+    studies_cli.main(command)
+    index = (results / "STUDIES.md").read_text()
+    assert "](error-control.md)" not in index
+    assert "`benchmarks/results/studies/error-control.md` in sb3_classic's repository" in index
+    (results / "error-control.md").write_text("# Error control\n")
+    studies_cli.main(command)
+    assert "[error-control.md](error-control.md)" in (results / "STUDIES.md").read_text()
 
 
 def test_runs_without_an_episode_are_said_to_be(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -13,6 +13,7 @@ from typing import Any
 
 from torch import nn
 
+from sb3_classic.common.obgd import ObGD
 from sb3_classic.common.utils import check_bool, check_choice, check_learning_rate, check_positive_int, check_range
 
 #: True while ``load()`` builds a model (the rules then accept a learning rate of 0: rl-zoo3's ``enjoy`` loads with
@@ -177,8 +178,9 @@ def check_keywords(cls: type, kwargs: Mapping[str, Any], family: type | None = N
     :param family: the package's base class of ``cls`` (``ClassicOnPolicyAlgorithm``): its other subclasses in the
         package are the algorithms whose arguments a user may give ``cls`` by mistake
     :raises TypeError: for a keyword its constructor does not take (Python's own error names no fix), naming the other
-        algorithm that takes it, if one does, and the closest argument ``cls`` takes. A constructor that passes
-        ``**kwargs`` on to ``object`` takes any keyword, and nothing is checked
+        algorithm that takes it, if one does, or the policy or ``ObGD`` (to pass in ``policy_kwargs``), else the closest
+        argument ``cls`` takes. A constructor that passes ``**kwargs`` on to ``object`` takes any keyword, and nothing is
+        checked
     """
     inits = [klass.__dict__["__init__"] for klass in cls.__mro__ if "__init__" in klass.__dict__]
     takes_any = all(
@@ -191,7 +193,7 @@ def check_keywords(cls: type, kwargs: Mapping[str, Any], family: type | None = N
     for key in kwargs:
         if key not in arguments:
             public = [name for name in arguments if not name.startswith("_")]
-            close = difflib.get_close_matches(key, public, n=1)
+            close = [_ALIASES[key]] if _ALIASES.get(key) in public else difflib.get_close_matches(key, public, n=1)
             hint = f"did you mean {close[0]!r}?" if close else f"{cls.__name__} takes {', '.join(public)}"
             others: list[type] = [] if family is None else family.__subclasses__()
             owners = [
@@ -203,7 +205,20 @@ def check_keywords(cls: type, kwargs: Mapping[str, Any], family: type | None = N
             ]
             if owners:
                 hint = f"it is an argument of {' and '.join(owners)}, not of {cls.__name__}; {hint}"
+            elif key in constructor_parameters(ObGD).keys() - {"self", "params", "lr"}:
+                hint = f"it is ObGD's: pass policy_kwargs=dict(optimizer_class=ObGD, optimizer_kwargs=dict({key}=...))"
+            elif any(key in constructor_parameters(policy) for policy in _policy_classes(cls)):
+                hint = f"it is an argument of the policy: pass policy_kwargs=dict({key}=...)"
             raise TypeError(f"{cls.__name__}() got an unexpected keyword argument {key!r}: {hint}")
+
+
+#: Other names of an argument: PyTorch's and the book's for the step size
+_ALIASES = {"lr": "learning_rate", "alpha": "learning_rate"}
+
+
+def _policy_classes(cls: type) -> list[type]:
+    """:return: the policy classes an algorithm class names (SB3's ``policy_aliases``)"""
+    return [policy for policy in getattr(cls, "policy_aliases", {}).values() if isinstance(policy, type)]
 
 
 #: The policy's arguments the algorithm passes itself (not ``policy_kwargs``)

@@ -44,10 +44,19 @@ class ObGD(th.optim.Optimizer):
     :param params: the parameters (or parameter groups) to train
     :param lr: the step size α (the algorithm's ``learning_rate`` sets it before every update)
     :param kappa: κ, the bound's scale: at most :math:`1/\kappa` of the way to the target per step (≥ 0; 0: no bound)
+    :param unknown: refused (λ and γ are the algorithm's ``td_lambda`` and ``gamma``)
     :raises ValueError: for a negative or non-finite ``lr`` or ``kappa``
+    :raises TypeError: for any other argument, naming where λ and γ are set
     """
 
-    def __init__(self, params: Iterable[Any], lr: float = 1.0, kappa: float = DEFAULT_KAPPA) -> None:
+    def __init__(self, params: Iterable[Any], lr: float = 1.0, kappa: float = DEFAULT_KAPPA, **unknown: Any) -> None:
+        if unknown:
+            # (Python's own error names no fix; the paper's code names λ and γ among the optimizer's arguments)
+            raise TypeError(
+                f"ObGD() got unexpected arguments {', '.join(map(repr, unknown))}: it takes lr (α) and kappa (κ). The "
+                "traces' λ is the algorithm's td_lambda (NStepSARSA; REINFORCE's steps take λ = 0) and γ its gamma: "
+                "pass them to the algorithm, not in optimizer_kwargs"
+            )
         for name, value, hint in (
             ("lr", lr, "α = 1 is the paper's (the algorithm's learning_rate sets it)"),
             ("kappa", kappa, "κ = 2 is the paper's for a value learner, 3 for an actor; 0 turns the bound off"),
@@ -210,13 +219,15 @@ def check_obgd_settings(why: str, required: Sequence[tuple[str, Any, Any, str]],
     :param why: what ObGD's step is in the algorithm, for the messages
     :param required: (argument, its value, the value ObGD needs, the fix) for each setting
     :param max_grad_norm: ``max_grad_norm`` (``math.inf`` or None: no clipping)
-    :raises ValueError: naming the first setting ObGD cannot train with, and the fix
+    :raises ValueError: naming every setting ObGD cannot train with, each with its fix
     """
-    for name, value, needed, fix in required:
-        if value != needed:
-            raise ValueError(f"{name}={value!r} with optimizer_class=ObGD: {why}; {fix}, or use another optimizer")
+    problems = [
+        f"{name}={value!r} with optimizer_class=ObGD: {fix}" for name, value, needed, fix in required if value != needed
+    ]
     if max_grad_norm is not None and math.isfinite(max_grad_norm):
-        raise ValueError(
-            f"max_grad_norm={max_grad_norm!r} with optimizer_class=ObGD: {why}, and bounds its own step (M = ακδ̄‖e‖₁); "
-            "drop max_grad_norm, or use another optimizer"
+        problems.append(
+            f"max_grad_norm={max_grad_norm!r} with optimizer_class=ObGD: drop max_grad_norm (ObGD bounds its own step, "
+            "M = ακδ̄‖e‖₁)"
         )
+    if problems:
+        raise ValueError(f"{why}. " + "; ".join(problems) + ". Or use another optimizer")

@@ -297,6 +297,7 @@ def optimizer_kwargs_with_defaults(
     :param optimizer_kwargs: the policy's ``optimizer_kwargs``
     :return: a new dict (the policy's ``optimizer_kwargs`` are saved with the model as given)
     :raises ValueError: if they set ``lr`` (or ``learning_rate``), which the algorithm's learning rate sets
+    :raises TypeError: if ``optimizer_class`` is not an optimizer class (a string, say)
     """
     kwargs = dict(optimizer_kwargs or {})
     for key in {"lr", "learning_rate"} & kwargs.keys():
@@ -307,6 +308,12 @@ def optimizer_kwargs_with_defaults(
             "learning_rate (and REINFORCE's value_learning_rate for v̂), which sets the optimizer's lr before every "
             f"update (a float or an SB3 schedule). Pass learning_rate=... to the algorithm instead, and drop {key} from "
             "optimizer_kwargs"
+        )
+    if not (isinstance(optimizer_class, type) and issubclass(optimizer_class, th.optim.Optimizer)):
+        raise TypeError(
+            f"policy_kwargs=dict(optimizer_class={optimizer_class!r}): give the optimizer class itself, e.g. "
+            "optimizer_class=th.optim.Adam or ObGD (from sb3_classic import ObGD); in a zoo YAML, inside the "
+            "policy_kwargs string, where ObGD is in scope"
         )
     if issubclass(optimizer_class, (th.optim.Adam, th.optim.AdamW)) and not {"fused", "foreach"} & kwargs.keys():
         kwargs["fused"] = True

@@ -20,7 +20,7 @@ from rich.markup import escape
 from sb3_classic.harness.common import positive_int
 from sb3_classic.harness.pool import report_missing, run_missing_runs
 from sb3_classic.harness.runner import RUN_FILE, DamagedRunError, RunError, check_run
-from sb3_classic.studies import sequential
+from sb3_classic.studies import sequential, stats
 from sb3_classic.studies.outputs import (
     PROGRAM,
     StudyResults,
@@ -299,9 +299,18 @@ def print_verdicts(results: StudyResults, console: Console) -> None:
     study = results.study
     console.print(f"{study.name}: {training_summary(study)}", highlight=False, markup=False, soft_wrap=True)
     for reading, judged in results.verdicts.items():
+        # (a claim's variants with fewer seeds than any interval needs: its verdict is too close to call, and why)
+        found = [len(seeds) for (seeds_reading, _), seeds in results.seeds.items() if seeds_reading == reading]
+        too_few = min(found, default=stats.MIN_SEEDS) < stats.MIN_SEEDS
         for result in judged:
             where = "" if len(results.verdicts) == 1 else f" [{reading}]"
             console.print(f"{study.name}{where}: {result.verdict}: {result.claim.text}", highlight=False, markup=False)
+            if too_few and result.verdict == stats.TOO_CLOSE:
+                console.print(
+                    f"  {min(found)} seeds per variant: a verdict needs at least {stats.MIN_SEEDS}",
+                    highlight=False,
+                    markup=False,
+                )
             if result.untrained:
                 console.print(f"  not learned: {result.untrained}", highlight=False, markup=False)
 

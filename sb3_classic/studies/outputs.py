@@ -30,6 +30,8 @@ from sb3_classic.studies import sequential, stats, untrained
 from sb3_classic.studies.spec import STATED, StudyRun, StudySpec
 
 STUDIES_FILE = "STUDIES.md"
+#: The measured error rates of the verdicts' rule, beside the repository's results (``benchmarks.studies.error_rates``)
+ERROR_CONTROL = "error-control.md"
 NOT_RUN = "not yet run"
 #: The module of the command the outputs show (``python -m sb3_classic.studies ...``)
 PROGRAM = "sb3_classic.studies"
@@ -495,7 +497,7 @@ def write_study(results: StudyResults, results_dir: Path, command: str, reduced:
         _threshold_note(study, censored_at),
         f"- Intervals{' of the table' if study.design is not None else ''}: {_intervals(_fewest_seeds(results))}; "
         "verdicts by the rule of [STUDIES.md](STUDIES.md).",
-        *_design_notes(results),
+        *_design_notes(results, results_dir),
         *_random_level_notes(results),
         *_short_budget_notes(study),
         *_step_budget_notes(results),
@@ -662,7 +664,7 @@ def write_studies_index(
         "",
         f"{len(rows)} {plural(len(rows), 'claim', 'claims')}: {tally}.",
         "",
-        _family_note(len(rows), studies),
+        _family_note(len(rows), studies, results_dir),
         "",
         f"Planned, for the {len(studies)} study {plural(len(studies), 'file', 'files')} named: {len(planned)} runs"
         + (f" at most ({designs} of a sequential design run the looks their claims need)" if designs else "")
@@ -719,7 +721,7 @@ def settings_yaml(settings: dict[str, Any]) -> str:
     return yaml.dump(settings, Dumper=_SettingsDumper, sort_keys=False).rstrip()
 
 
-def _family_note(n_claims: int, studies: Sequence[StudySpec]) -> str:
+def _family_note(n_claims: int, studies: Sequence[StudySpec], results_dir: Path) -> str:
     """:return: STUDIES.md's line on the error rate per claim and what it means for all of them together"""
     alpha = 1 - stats.CONFIDENCE
     designs = sum(study.design is not None for study in studies)
@@ -736,7 +738,7 @@ def _family_note(n_claims: int, studies: Sequence[StudySpec]) -> str:
         "difference, fewer as some do: no correction is made across claims, each is its own question. The rates "
         "measured on synthetic per-seed data, and where they exceed the design's (a level where most seeds sit at a "
         "bound of the returns; 10 seeds' BCa intervals): "
-        "[error-control.md](error-control.md)."
+        f"{_error_control(results_dir)}."
     )
 
 
@@ -756,7 +758,15 @@ def _looks_taken(looked: sequential.SequentialVerdict) -> str:
     return text + (f"; {looked.needed}" if looked.needed else "")
 
 
-def _design_notes(results: StudyResults) -> list[str]:
+def _error_control(results_dir: Path) -> str:
+    """:return: a link to the measured error rates where they lie beside the outputs (the repository's results), else
+    where to find them"""
+    if (results_dir / ERROR_CONTROL).exists():
+        return f"[{ERROR_CONTROL}]({ERROR_CONTROL})"
+    return f"`benchmarks/results/studies/{ERROR_CONTROL}` in sb3_classic's repository"
+
+
+def _design_notes(results: StudyResults, results_dir: Path) -> list[str]:
     """:return: what the study's sequential design and equivalence margin are, and its seeds recorded, not cached"""
     study, notes = results.study, []
     if study.design is not None:
@@ -764,7 +774,7 @@ def _design_notes(results: StudyResults) -> list[str]:
             f"- Sequential design: {study.design.describe()}; studentized bootstrap intervals joined with Student's "
             "t-intervals; a claim decided at a look keeps its verdict and draws no more seeds; designed for "
             f"{study.design.alpha:.0%} wrong verdicts per claim where there is no difference, however early it stops "
-            "(the rates measured: [error-control.md](error-control.md))."
+            f"(the rates measured: {_error_control(results_dir)})."
         )
     margins = sorted({margin for claim in study.claims if (margin := sequential.claim_margin(study, claim)) is not None})
     if margins:

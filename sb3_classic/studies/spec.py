@@ -479,6 +479,30 @@ class _Checker:
         return False
 
 
+_ONE_OF_VARY_VARIANTS = "give exactly one of `vary:` (one axis: {n_steps: [1, 5, 10]}) and `variants:` (named overrides)"
+_ONE_OF_CLAIM_CLAIMS = "give exactly one of `claim:` (one claim) and `claims:` (a list)"
+
+
+def _check_top_level(check: _Checker, data: Mapping[str, Any]) -> None:
+    """The file's fields: each known, the required ones given; raises at once only for a missing one, which the other
+    fields are read from (an unknown field is said with every other problem of the file)"""
+    for key in data:
+        if key not in _TOP_KEYS:
+            close = difflib.get_close_matches(str(key), _TOP_KEYS, n=1)
+            check.fail(
+                str(key), "unknown field" + (f": did you mean {close[0]!r}?" if close else f"; known: {', '.join(_TOP_KEYS)}")
+            )
+    missing = [key for key in ("env", "algo", "budget", "hyperparams") if key not in data]
+    for key in missing:
+        check.fail(key, "missing (a study needs env, algo, budget, hyperparams, variants or vary, and a claim)")
+    if ("vary" in data) == ("variants" in data):
+        check.fail("variants", _ONE_OF_VARY_VARIANTS)
+    if ("claim" in data) == ("claims" in data):
+        check.fail("claim", _ONE_OF_CLAIM_CLAIMS)
+    if missing:
+        check.raise_if_any()
+
+
 def load_study(path: Path | str) -> StudySpec:
     """
     Read and check a study file.
@@ -495,16 +519,7 @@ def load_study(path: Path | str) -> StudySpec:
         raise StudyError(f"{path}: cannot be read as YAML: {error}") from error
     if not isinstance(data, Mapping):
         raise StudyError(f"{path}: a study file is a mapping (env:, algo:, hyperparams:, ...), got {type(data).__name__}")
-    for key in data:
-        if key not in _TOP_KEYS:
-            close = difflib.get_close_matches(str(key), _TOP_KEYS, n=1)
-            check.fail(
-                str(key), "unknown field" + (f": did you mean {close[0]!r}?" if close else f"; known: {', '.join(_TOP_KEYS)}")
-            )
-    for key in ("env", "algo", "budget", "hyperparams"):
-        if key not in data:
-            check.fail(key, "missing (a study needs env, algo, budget, hyperparams, variants or vary, and a claim)")
-    check.raise_if_any()
+    _check_top_level(check, data)
 
     env_id, registration, algo = _env_and_algo(check, data)
 
@@ -842,9 +857,7 @@ def _budget(check: _Checker, value: Any) -> Budget | None:
 
 def _variants(check: _Checker, data: Mapping[str, Any], algo: str) -> dict[str, dict[str, Any]]:
     if ("vary" in data) == ("variants" in data):
-        check.fail(
-            "variants", "give exactly one of `vary:` (one axis: {n_steps: [1, 5, 10]}) and `variants:` (named overrides)"
-        )
+        check.fail("variants", _ONE_OF_VARY_VARIANTS)
         return {}
     if "vary" in data:
         vary = data["vary"]
@@ -857,7 +870,9 @@ def _variants(check: _Checker, data: Mapping[str, Any], algo: str) -> dict[str, 
             return {}
         variants = {}
         for value in values:
-            name = f"{key}={value}"
+            # A number YAML read as a string (1e-3) is named as it will be once written as one (learning_rate=0.001)
+            number = isinstance(value, str) and yaml_float_string(value) is not None
+            name = f"{key}={float(value) if number else value}"
             if name in variants:
                 check.fail(f"vary.{key}", f"{value!r} appears twice")
             variants[name] = check.hyperparams("vary", {key: value}, algo)
@@ -964,7 +979,7 @@ def _check_return_levels(
 
 def _claims(check: _Checker, data: Mapping[str, Any], variants: Mapping[str, Any], threshold: float) -> tuple[Claim, ...]:
     if ("claim" in data) == ("claims" in data):
-        check.fail("claim", "give exactly one of `claim:` (one claim) and `claims:` (a list)")
+        check.fail("claim", _ONE_OF_CLAIM_CLAIMS)
         return ()
     raw: Sequence[Any] = [data["claim"]] if "claim" in data else data["claims"]
     if not isinstance(raw, list | tuple) or not raw:
