@@ -238,23 +238,42 @@ def _patch_objective(manager: type) -> None:
     manager.objective = objective  # type: ignore[attr-defined]
 
 
+def _same_setting(first: Any, second: Any) -> bool:
+    """
+    :return: whether two values of a setting are the same, as a saved model gives them back: a tuple as a list (SB3
+        saves JSON-able ``policy_kwargs`` as JSON), arrays by their elements
+    """
+    if isinstance(first, dict) and isinstance(second, dict):
+        return first.keys() == second.keys() and all(_same_setting(first[key], second[key]) for key in first)
+    if isinstance(first, list | tuple) and isinstance(second, list | tuple):
+        return len(first) == len(second) and all(map(_same_setting, first, second))
+    if isinstance(first, np.ndarray) or isinstance(second, np.ndarray):
+        return np.shape(first) == np.shape(second) and bool(np.all(np.asarray(first) == np.asarray(second)))
+    try:
+        return bool(first == second)
+    except (TypeError, ValueError):  # (a comparison without one truth value)
+        return False
+
+
 def policy_kwargs_differences(entry: dict[str, Any], saved: dict[str, Any]) -> list[str]:
     """
     :param entry: a YAML entry's ``policy_kwargs`` (evaluated)
     :param saved: a saved model's ``policy_kwargs``
     :return: each of the entry's settings that the model has otherwise (of a dict, such as ``optimizer_kwargs``, each
-        key the entry sets), as "name: the entry's, the model's"
+        key the entry sets), and the model's ``optimizer_class`` where the entry leaves it to the default, as "name:
+        the entry's, the model's"
     """
+    names = [*entry, *(["optimizer_class"] if "optimizer_class" in saved and "optimizer_class" not in entry else [])]
     differences = []
-    for name, value in entry.items():
-        found = saved.get(name)
+    for name in names:
+        value, found = entry.get(name), saved.get(name)
         if isinstance(value, dict) and isinstance(found, dict):
             differences += [
                 f"{name}[{key!r}]: {item!r} in the YAML, {found.get(key)!r} in the model"
                 for key, item in value.items()
-                if found.get(key) != item
+                if not _same_setting(item, found.get(key))
             ]
-        elif found != value:
+        elif not _same_setting(value, found):
             differences.append(f"{name}: {value!r} in the YAML, {found!r} in the model")
     return differences
 
@@ -281,8 +300,8 @@ def _patch_load_pretrained_agent(manager: type) -> None:
                     f"-i {self.trained_agent}: the YAML entry's policy_kwargs differ from the model's ("
                     + "; ".join(differences)
                     + "). The zoo continues a model with its own networks and optimizer, but with the entry's other "
-                    "settings (learning rates among them), chosen for the entry's: continue with the YAML (-conf) the "
-                    "model was trained with, or train a new model without -i"
+                    "settings (learning rates among them), chosen for the entry's: continue with the settings the "
+                    "model was trained with (its -conf, -params or --trial-id), or train a new model without -i"
                 )
         return original(self, hyperparams, env)
 

@@ -6,7 +6,7 @@ registers them with rl-zoo3.
 A search draws what the YAML entry it tunes can train with (the zoo puts a trial's values over the entry's:
 ``kwargs.update(sampled)``). Three kinds of entry:
 
-- a **network** (``MlpPolicy`` with Adam or another gradient optimizer): the network, the learning rates and their
+- a **network** (``MlpPolicy``, ``CnnPolicy``, ...; a trial trains it with Adam): the network, the learning rates and their
   step decay, γ, and each algorithm's own settings;
 - a **linear** q̂ (SARSA's ``LinearPolicy``, the book's features such as tile coding): the same without the network
   and the loss, which ``LinearPolicy`` fixes (its own SGD on ½δ², in the entry's features);
@@ -15,9 +15,10 @@ A search draws what the YAML entry it tunes can train with (the zoo puts a trial
   update per env step stay the entry's, and the network keeps the recipe's sparse initialisation and LayerNorm without
   parameters (``streaming_policy_kwargs``).
 
-The sampler learns the kind from the entry the zoo's ``objective`` is tuning (``searched_entry``, set by
-``sb3_classic.zoo``); the converter from the trial's parameters (``kappa`` drawn: the recipe; no network drawn:
-linear), so that a stored trial trains as it was tuned.
+A trial's ``policy_kwargs`` replace the entry's (the drawn network with the default optimizer, or the recipe's with
+ObGD), except a linear entry's, which it keeps. The sampler learns the kind from the entry the zoo's ``objective`` is
+tuning (``searched_entry``, set by ``sb3_classic.zoo``); the converter from the trial's parameters (``kappa`` drawn:
+the recipe; no network drawn: linear), so that a stored trial trains as it was tuned.
 """
 
 import contextlib

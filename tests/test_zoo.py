@@ -895,6 +895,16 @@ def test_policy_kwargs_differences() -> None:
     saved |= {"optimizer_class": ObGD, "optimizer_kwargs": {"kappa": 3.0}}
     assert policy_kwargs_differences(entry, saved) == ["optimizer_kwargs['kappa']: 2.0 in the YAML, 3.0 in the model"]
     assert policy_kwargs_differences(entry, saved | {"optimizer_kwargs": {"kappa": 2.0}}) == []
+    # As a saved model gives them back: a tuple as a list (SB3 saves JSON-able policy_kwargs as JSON), arrays (a
+    # TileCoding's bounds) by their elements, where comparing them raised
+    tiles = {"features_extractor_kwargs": {"low": np.array([-1.2, -0.07]), "high": np.array([0.6, 0.07])}}
+    assert policy_kwargs_differences({"net_arch": (8,), **tiles}, {"net_arch": [8], **tiles}) == []
+    moved = {"features_extractor_kwargs": {"low": np.array([-1.2, -0.07]), "high": np.array([0.6, 0.08])}}
+    assert len(policy_kwargs_differences(tiles, moved)) == 1
+    # An entry that leaves the optimizer to its default (Adam) for a model trained with ObGD
+    assert policy_kwargs_differences({"net_arch": [32]}, {"net_arch": [32], "optimizer_class": ObGD}) == [
+        f"optimizer_class: None in the YAML, {ObGD!r} in the model"
+    ]
 
 
 def test_continuing_a_model_with_another_networks_yaml_is_refused(tmp_path: Path) -> None:
@@ -910,7 +920,7 @@ def test_continuing_a_model_with_another_networks_yaml_is_refused(tmp_path: Path
     assert result.returncode != 0
     message = " ".join(result.stderr.split())
     assert "the YAML entry's policy_kwargs differ from the model's (net_arch: [128, 128] in the YAML, [256, 256]" in message
-    assert "continue with the YAML (-conf) the model was trained with" in message
+    assert "continue with the settings the model was trained with (its -conf, -params or --trial-id)" in message
     assert not (tmp_path / "logs" / "nstep_sarsa" / "CartPole-v1_2" / "CartPole-v1.zip").exists()
 
 

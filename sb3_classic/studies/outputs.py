@@ -40,7 +40,7 @@ PROGRAM = "sb3_classic.studies"
 #: The panels (one per reading) in a row of a study's figure
 MAX_PANEL_COLUMNS = 4
 #: Characters of the figure's title per inch of its width (at its font size, 10 points), where a line wraps
-TITLE_CHARACTERS_PER_INCH = 13
+TITLE_CHARACTERS_PER_INCH = 12
 #: STUDIES.md names each other reading's verdict of a claim up to this many readings, and sums them up beyond
 MAX_LISTED_READINGS = 3
 #: Beside a verdict in STUDIES.md where the compared variants stayed at a random policy's return (``stats.untrained_note``)
@@ -410,7 +410,8 @@ def plot_study(results: StudyResults, path: Path) -> Path:
         row[0].set_ylabel("Training return")
     title = [study.title, f"mean over seeds with its {_band(_fewest_seeds(results))}{smooth}"]
     width = int(TITLE_CHARACTERS_PER_INCH * figure.get_figwidth())
-    figure.suptitle("\n".join(textwrap.fill(line, width) for line in title), fontsize=10)
+    lines = [line for text in title for line in text.splitlines()]
+    figure.suptitle("\n".join(textwrap.fill(line, width) for line in lines), fontsize=10)
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(path, dpi=110)
     plt.close(figure)
