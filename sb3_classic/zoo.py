@@ -11,7 +11,12 @@ What ``register()`` changes in rl-zoo3, and nothing else:
 
 - ``rl_zoo3.utils.ALGOS`` (also ``rl_zoo3.ALGOS``) gains ``"reinforce"`` and ``"nstep_sarsa"``;
 - ``rl_zoo3.hyperparams_opt.HYPERPARAMS_SAMPLER`` and ``HYPERPARAMS_CONVERTER`` gain their Optuna search spaces
-  (``-optimize``) and the conversion of a stored trial back into constructor arguments (``--trial-id``);
+  (``-optimize``) and the conversion of a stored trial back into constructor arguments (``--trial-id``), both in
+  ``sb3_classic.zoo_search``;
+- ``ExperimentManager.objective``, for these two algorithms, lets those search spaces see the YAML entry a trial
+  tunes (a streaming or ``LinearPolicy`` entry has its own space);
+- ``ExperimentManager._load_pretrained_agent`` (``-i``), for these two algorithms, refuses a YAML entry whose
+  ``policy_kwargs`` differ from the saved model's (the zoo drops them but passes the entry's other settings);
 - ``ExperimentManager.__init__`` defaults ``config`` to this package's YAML for these two algorithms (``-conf``
   still wins), and, for them, sets PyTorch to one thread on the CPU unless the user chose a number: see
   ``one_thread_unless_chosen``;
@@ -29,35 +34,33 @@ What ``register()`` changes in rl-zoo3, and nothing else:
   book's features (``features_extractor_class=TileCoding``), and ``ObGD``, the streaming optimizer (``optimizer_class=ObGD``).
 """
 
+import argparse
 import contextlib
 import functools
 import importlib
 import inspect
+import sys
 import weakref
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from types import ModuleType
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import torch as th
 from sb3_contrib.common.maskable.callbacks import MaskableEvalCallback
 from stable_baselines3.common.callbacks import EvalCallback
+from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.utils import get_device
 from stable_baselines3.common.vec_env import VecEnv
-from torch import nn
 
 from sb3_classic.common.masking import get_action_masks, is_masking_supported
 from sb3_classic.common.obgd import ObGD
 from sb3_classic.common.threads import threads_chosen
 from sb3_classic.common.tile_coding import TileCoding
-from sb3_classic.common.torch_layers import WEIGHT_INITS
 from sb3_classic.reinforce import REINFORCE
 from sb3_classic.sarsa import NStepSARSA
-from sb3_classic.sarsa.arguments import DEFAULT_EXPLORATION_DECAY_RATE
-
-if TYPE_CHECKING:
-    import optuna
+from sb3_classic.zoo_search import CONVERTERS, SAMPLERS, searched_entry
 
 #: The rl-zoo3 versions this module patches (the ``zoo`` extra's requirement)
 SUPPORTED_RL_ZOO3 = ">=2.9,<3"
@@ -77,192 +80,30 @@ _PATCHED = "_sb3_classic_zoo"
 # True while register() imports rl_zoo3
 _registering = False
 
-# The search spaces' names for what they sample, as the zoo's own samplers name them
-ACTIVATIONS: dict[str, type[nn.Module]] = {"tanh": nn.Tanh, "relu": nn.ReLU, "leaky_relu": nn.LeakyReLU, "elu": nn.ELU}
-LAYER_SIZES = (32, 64, 128, 256)
-MAX_LAYERS = 3
-# Learning-rate step decay: factor per decay (1.0: none), and every how many episodes
-LR_DECAY_FACTORS = (1.0, 0.95, 0.9, 0.8, 0.5)
-LR_DECAY_EVERY = (10, 25, 50, 100, 250)
-
 
 class ZooCompatibilityError(ImportError):
     """The installed rl-zoo3 lacks something ``register()`` patches."""
 
 
-def hyperparams_path(algo: str) -> Path:
+def hyperparams_path(name: str) -> Path:
     """
-    :param algo: ``"reinforce"`` or ``"nstep_sarsa"``
-    :return: the package's rl-zoo3 YAML of default hyperparameters for ``algo``
+    The package's rl-zoo3 YAMLs, in ``hyperparams/`` of a checkout and inside the installed package: the path for
+    ``-conf`` from any folder (``-conf "$(python -m sb3_classic.zoo nstep_sarsa_streaming)"``).
+
+    :param name: ``"reinforce"`` or ``"nstep_sarsa"`` (the default hyperparameters, which the zoo reads without
+        ``-conf``), or ``"reinforce_streaming"``, ``"nstep_sarsa_streaming"`` (the streaming recipe's)
+    :return: that YAML's path
+    :raises ValueError: for another name
     """
-    if algo not in ALGORITHMS:
-        raise ValueError(f"algo={algo!r} must be one of {', '.join(map(repr, ALGORITHMS))}")
+    names = [*ALGORITHMS, *(f"{algo}_streaming" for algo in ALGORITHMS)]
+    if name not in names:
+        raise ValueError(f"{name!r} must be one of {', '.join(map(repr, names))}")
     for directory in _HYPERPARAMS_DIRS:
-        path = directory / f"{algo}.yml"
+        path = directory / f"{name}.yml"
         if path.is_file():
             return path
     searched = " or ".join(str(directory) for directory in _HYPERPARAMS_DIRS)
-    raise FileNotFoundError(f"{algo}.yml is in neither {searched}: reinstall sb3_classic")
-
-
-def _suggest_network(trial: "optuna.Trial") -> dict[str, Any]:
-    """Sample the network's depth, width, activation and initialisation (the same for every network of the policy)."""
-    return {
-        "n_layers": trial.suggest_int("n_layers", 1, MAX_LAYERS),
-        "layer_size": trial.suggest_categorical("layer_size", LAYER_SIZES),
-        "activation_fn": trial.suggest_categorical("activation_fn", tuple(ACTIVATIONS)),
-        "weight_init": trial.suggest_categorical("weight_init", WEIGHT_INITS),
-    }
-
-
-def _suggest_lr_decay(trial: "optuna.Trial") -> dict[str, Any]:
-    """Sample a step decay of the learning rate(s), counted in episodes (1.0: no decay)."""
-    return {
-        "lr_decay_factor": trial.suggest_categorical("lr_decay_factor", LR_DECAY_FACTORS),
-        "lr_decay_every": trial.suggest_categorical("lr_decay_every", LR_DECAY_EVERY),
-    }
-
-
-def _convert_common(sampled_params: dict[str, Any]) -> dict[str, Any]:
-    """
-    The conversions both search spaces share: γ from 1 − γ, ``policy_kwargs`` from the network's parameters, and a
-    step decay counted in episodes that replaces the YAML's (whose milestones would conflict with ``lr_decay_every``).
-
-    :param sampled_params: a trial's parameters
-    :return: constructor arguments
-    """
-    hyperparams = dict(sampled_params)
-    hyperparams["gamma"] = 1 - hyperparams.pop("one_minus_gamma")
-    n_layers, layer_size = hyperparams.pop("n_layers"), hyperparams.pop("layer_size")
-    hyperparams["policy_kwargs"] = {
-        "net_arch": [layer_size] * n_layers,
-        "activation_fn": ACTIVATIONS[hyperparams.pop("activation_fn")],
-        "weight_init": hyperparams.pop("weight_init"),
-    }
-    hyperparams.update(lr_decay_milestones=None, lr_decay_unit="episode")
-    return hyperparams
-
-
-def convert_reinforce_params(sampled_params: dict[str, Any]) -> dict[str, Any]:
-    """
-    Turn the parameters of a trial of ``sample_reinforce_params`` into ``REINFORCE`` arguments
-    (rl-zoo3 calls it to train with a stored trial: ``--storage ... --study-name ... --trial-id N``).
-
-    :param sampled_params: the trial's parameters (``trial.params``)
-    :return: keyword arguments of ``REINFORCE``; with ``normalize_advantage=True``, ``update_mode="batch"`` too
-        (standardising δ needs a batch: a YAML's ``per_step`` would be refused and end the study)
-    """
-    params = _convert_common(sampled_params)
-    if params.get("normalize_advantage"):
-        params["update_mode"] = "batch"
-    return params
-
-
-def sample_reinforce_params(
-    trial: "optuna.Trial", n_actions: int, n_envs: int, additional_args: dict[str, Any]
-) -> dict[str, Any]:
-    """
-    Optuna search space of REINFORCE with baseline (rl-zoo3's ``-optimize``): both learning rates, episodes per
-    update, γ, advantage normalisation, entropy bonus, learning-rate step decay, and the networks' depth, width,
-    activation and initialisation. A trial that draws advantage normalisation trains in batch mode (its
-    ``update_mode`` user attribute says so), whatever the YAML's ``update_mode``.
-
-    :param trial: the Optuna trial to sample from
-    :param n_actions: size of a Box action space (unused)
-    :param n_envs: number of envs (unused)
-    :param additional_args: rl-zoo3's extra information (unused)
-    :return: keyword arguments of ``REINFORCE``
-    """
-    sampled_params = {
-        # α^θ and α^w: the seed report's best are 0.003/0.01 (CartPole) and 0.001/0.1 (Acrobot)
-        "learning_rate": trial.suggest_float("learning_rate", 1e-4, 1e-2, log=True),
-        "value_learning_rate": trial.suggest_float("value_learning_rate", 1e-4, 1e-1, log=True),
-        "n_episodes": trial.suggest_categorical("n_episodes", (1, 2, 4, 8, 16)),
-        "one_minus_gamma": trial.suggest_float("one_minus_gamma", 1e-4, 0.03, log=True),
-        "normalize_advantage": trial.suggest_categorical("normalize_advantage", (False, True)),
-        "ent_coef": trial.suggest_float("ent_coef", 1e-8, 0.1, log=True),
-        **_suggest_lr_decay(trial),
-        **_suggest_network(trial),
-    }
-    trial.set_user_attr("gamma", 1 - sampled_params["one_minus_gamma"])
-    if sampled_params["normalize_advantage"]:
-        trial.set_user_attr("update_mode", "batch")
-    return convert_reinforce_params(sampled_params)
-
-
-def convert_nstep_sarsa_params(sampled_params: dict[str, Any]) -> dict[str, Any]:
-    """
-    Turn the parameters of a trial of ``sample_nstep_sarsa_params`` into ``NStepSARSA`` arguments
-    (rl-zoo3 calls it to train with a stored trial: ``--storage ... --study-name ... --trial-id N``).
-
-    :param sampled_params: the trial's parameters (``trial.params``)
-    :return: keyword arguments of ``NStepSARSA``, the parameter of the ε schedule not chosen at its neutral value
-        (the default ``exploration_decay_rate``, or ``exploration_fraction=None``): ``NStepSARSA`` refuses the other
-        schedule's parameter, and a YAML's or ``-params``' value of it would otherwise stay and end the study
-    """
-    params = _convert_common(sampled_params)
-    if params.get("exploration_schedule") == "linear":
-        params["exploration_decay_rate"] = DEFAULT_EXPLORATION_DECAY_RATE
-    else:
-        params["exploration_fraction"] = None
-    return params
-
-
-def sample_nstep_sarsa_params(
-    trial: "optuna.Trial", n_actions: int, n_envs: int, additional_args: dict[str, Any]
-) -> dict[str, Any]:
-    """
-    Optuna search space of n-step SARSA (rl-zoo3's ``-optimize``): n, learning rate, steps and gradient steps per
-    update, γ, Expected SARSA or not, the λ of the targets, the weight average of the greedy policy, the ε schedule
-    (exponential per episode or linear, its start and its floor), the loss, learning-rate step decay, and the
-    Q-network's depth, width, activation and initialisation.
-
-    :param trial: the Optuna trial to sample from
-    :param n_actions: size of a Box action space (unused)
-    :param n_envs: number of envs (unused)
-    :param additional_args: rl-zoo3's extra information (unused)
-    :return: keyword arguments of ``NStepSARSA``
-    """
-    sampled_params = {
-        # The seed report's best: n=10, α=0.0005 (CartPole); n=5, α=0.001 (Acrobot)
-        "n_steps": trial.suggest_categorical("n_steps", (1, 2, 3, 5, 10, 20)),
-        "learning_rate": trial.suggest_float("learning_rate", 1e-5, 1e-2, log=True),
-        "train_freq": trial.suggest_categorical("train_freq", (1, 4, 8, 16, 32, 64)),
-        "gradient_steps": trial.suggest_categorical("gradient_steps", (1, 2, 4, 8, 16)),
-        "one_minus_gamma": trial.suggest_float("one_minus_gamma", 1e-4, 0.03, log=True),
-        "expected_sarsa": trial.suggest_categorical("expected_sarsa", (False, True)),
-        "td_lambda": trial.suggest_categorical("td_lambda", (0.3, 0.5, 0.65, 0.8, 0.9, 1.0)),
-        # The greedy policy (so the trial's evaluations) from a Polyak average of q̂'s weights, or from q̂ (None)
-        "averaging_tau": trial.suggest_categorical("averaging_tau", (None, 0.02, 0.05, 0.1, 0.2)),
-        # ε ← max(ε_final, ε · rate) per episode, or linear over a fraction of training; both are sampled (without
-        # conditional parameters, multivariate TPE samples jointly) and the one of the schedule not chosen is dropped
-        "exploration_schedule": trial.suggest_categorical("exploration_schedule", ("exponential", "linear")),
-        "exploration_decay_rate": trial.suggest_categorical("exploration_decay_rate", (0.9, 0.95, 0.98, 0.99, 0.995, 0.999)),
-        "exploration_fraction": trial.suggest_categorical("exploration_fraction", (0.05, 0.1, 0.2, 0.4)),
-        # The initial ε too, at or above the floor: the YAML's would be kept (MountainCar-v0's 0.0, below a sampled
-        # floor, was refused and ended the study)
-        "exploration_initial_eps": trial.suggest_categorical("exploration_initial_eps", (0.2, 0.5, 1.0)),
-        "exploration_final_eps": trial.suggest_float("exploration_final_eps", 0.0, 0.2),
-        "loss_function": trial.suggest_categorical("loss_function", ("mse", "huber")),
-        **_suggest_lr_decay(trial),
-        **_suggest_network(trial),
-    }
-    trial.set_user_attr("gamma", 1 - sampled_params["one_minus_gamma"])
-    # The zoo reports every sampled parameter: say which one the trial did not train with (report_*.csv's
-    # user_attrs_unused column)
-    unused = "exploration_decay_rate" if sampled_params["exploration_schedule"] == "linear" else "exploration_fraction"
-    trial.set_user_attr("unused", unused)
-    return convert_nstep_sarsa_params(sampled_params)
-
-
-SAMPLERS: dict[str, Callable[["optuna.Trial", int, int, dict[str, Any]], dict[str, Any]]] = {
-    "reinforce": sample_reinforce_params,
-    "nstep_sarsa": sample_nstep_sarsa_params,
-}
-CONVERTERS: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] = {
-    "reinforce": convert_reinforce_params,
-    "nstep_sarsa": convert_nstep_sarsa_params,
-}
+    raise FileNotFoundError(f"{name}.yml is in neither {searched}: reinstall sb3_classic")
 
 
 def _incompatible(version: str, problem: str) -> ZooCompatibilityError:
@@ -319,6 +160,9 @@ def _zoo_targets() -> tuple[dict[str, Any], dict[str, Any], dict[str, Any], type
         raise _incompatible(version, "ExperimentManager._preprocess_schedules is not a static method")
     if not callable(getattr(manager, "create_callbacks", None)) or getattr(exp_manager, "EvalCallback", None) is None:
         raise _incompatible(version, "ExperimentManager.create_callbacks or rl_zoo3.exp_manager.EvalCallback is missing")
+    for method in ("objective", "_load_pretrained_agent"):
+        if not callable(getattr(manager, method, None)):
+            raise _incompatible(version, f"ExperimentManager.{method} is missing")
     if not callable(getattr(rl_zoo3, "create_test_env", None)):
         raise _incompatible(version, "rl_zoo3.create_test_env is missing")
     return algos, samplers, converters, manager, [exp_manager, utils, rl_zoo3]
@@ -371,6 +215,98 @@ def _patch_experiment_manager(manager: type) -> None:
 
     setattr(__init__, _PATCHED, True)
     manager.__init__ = __init__  # type: ignore[misc]
+
+
+def _patch_objective(manager: type) -> None:
+    """
+    Let the search spaces of these two algorithms see the YAML entry a trial tunes (``zoo_search.searched_entry``):
+    the zoo gives its samplers the trial, the size of a Box action space and the number of envs, not the entry, and a
+    streaming or ``LinearPolicy`` entry trains with other settings than a network's.
+    """
+    original = manager.objective  # type: ignore[attr-defined]
+    if getattr(original, _PATCHED, False):
+        return
+
+    @functools.wraps(original)
+    def objective(self: Any, trial: Any) -> float:
+        if self.algo not in ALGORITHMS:
+            return original(self, trial)
+        with searched_entry(self._hyperparams):
+            return original(self, trial)
+
+    setattr(objective, _PATCHED, True)
+    manager.objective = objective  # type: ignore[attr-defined]
+
+
+def _same_setting(first: Any, second: Any) -> bool:
+    """
+    :return: whether two values of a setting are the same, as a saved model gives them back: a tuple as a list (SB3
+        saves JSON-able ``policy_kwargs`` as JSON), arrays by their elements
+    """
+    if isinstance(first, dict) and isinstance(second, dict):
+        return first.keys() == second.keys() and all(_same_setting(first[key], second[key]) for key in first)
+    if isinstance(first, list | tuple) and isinstance(second, list | tuple):
+        return len(first) == len(second) and all(map(_same_setting, first, second))
+    if isinstance(first, np.ndarray) or isinstance(second, np.ndarray):
+        return np.shape(first) == np.shape(second) and bool(np.all(np.asarray(first) == np.asarray(second)))
+    try:
+        return bool(first == second)
+    except (TypeError, ValueError):  # (a comparison without one truth value)
+        return False
+
+
+def policy_kwargs_differences(entry: dict[str, Any], saved: dict[str, Any]) -> list[str]:
+    """
+    :param entry: a YAML entry's ``policy_kwargs`` (evaluated)
+    :param saved: a saved model's ``policy_kwargs``
+    :return: each of the entry's settings that the model has otherwise (of a dict, such as ``optimizer_kwargs``, each
+        key the entry sets), and the model's ``optimizer_class`` where the entry leaves it to the default, as "name:
+        the entry's, the model's"
+    """
+    names = [*entry, *(["optimizer_class"] if "optimizer_class" in saved and "optimizer_class" not in entry else [])]
+    differences = []
+    for name in names:
+        value, found = entry.get(name), saved.get(name)
+        if isinstance(value, dict) and isinstance(found, dict):
+            differences += [
+                f"{name}[{key!r}]: {item!r} in the YAML, {found.get(key)!r} in the model"
+                for key, item in value.items()
+                if not _same_setting(item, found.get(key))
+            ]
+        elif not _same_setting(value, found):
+            differences.append(f"{name}: {value!r} in the YAML, {found!r} in the model")
+    return differences
+
+
+def _patch_load_pretrained_agent(manager: type) -> None:
+    """
+    Refuse to continue a model (``-i``) with a YAML entry whose ``policy_kwargs`` differ from the model's. The zoo
+    keeps the model's networks and optimizer and drops the entry's ``policy_kwargs``, but passes its other settings,
+    chosen for that network and optimizer: a streaming entry's ``learning_rate: 1.0`` (ObGD's α) given to a model
+    trained with Adam diverged without a word.
+    """
+    original = manager._load_pretrained_agent  # type: ignore[attr-defined]
+    if getattr(original, _PATCHED, False):
+        return
+
+    @functools.wraps(original)
+    def _load_pretrained_agent(self: Any, hyperparams: dict[str, Any], env: VecEnv) -> Any:
+        entry = hyperparams.get("policy_kwargs")
+        if self.algo in ALGORITHMS and isinstance(entry, dict) and entry:
+            data, _, _ = load_from_zip_file(self.trained_agent, device="cpu")
+            differences = policy_kwargs_differences(entry, (data or {}).get("policy_kwargs") or {})
+            if differences:
+                raise ValueError(
+                    f"-i {self.trained_agent}: the YAML entry's policy_kwargs differ from the model's ("
+                    + "; ".join(differences)
+                    + "). The zoo continues a model with its own networks and optimizer, but with the entry's other "
+                    "settings (learning rates among them), chosen for the entry's: continue with the settings the "
+                    "model was trained with (its -conf, -params or --trial-id), or train a new model without -i"
+                )
+        return original(self, hyperparams, env)
+
+    setattr(_load_pretrained_agent, _PATCHED, True)
+    manager._load_pretrained_agent = _load_pretrained_agent  # type: ignore[attr-defined]
 
 
 def yaml_float_string(value: Any) -> str | None:
@@ -564,6 +500,32 @@ def register() -> None:
     samplers.update(SAMPLERS)
     converters.update(CONVERTERS)
     _patch_experiment_manager(manager)
+    _patch_objective(manager)
+    _patch_load_pretrained_agent(manager)
     _patch_preprocess_schedules(manager)
     _patch_eval_callback(manager, exp_manager)
     _patch_enjoy(zoo_package)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """
+    ``python -m sb3_classic.zoo NAME``: print the path of the package's YAML ``NAME`` (``hyperparams_path``), for
+    ``-conf`` from any folder.
+
+    :param argv: the arguments (None: the command line's)
+    :return: the exit status
+    """
+    parser = argparse.ArgumentParser(
+        prog="python -m sb3_classic.zoo", description="Print the path of one of the package's rl-zoo3 YAMLs, for -conf."
+    )
+    parser.add_argument("name", help="reinforce, nstep_sarsa, reinforce_streaming or nstep_sarsa_streaming")
+    args = parser.parse_args(argv)
+    try:
+        print(hyperparams_path(args.name))
+    except ValueError as error:
+        parser.error(str(error))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

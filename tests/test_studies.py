@@ -25,6 +25,7 @@ from typing import Any
 
 import matplotlib.figure
 import matplotlib.pyplot as plt
+import matplotlib.text
 import numpy as np
 import pandas as pd
 import pytest
@@ -942,6 +943,34 @@ def test_the_outputs_give_each_seed_and_say_when_runs_are_missing(tmp_path: Path
     assert "**Partial**: 1 of 4 runs are missing" in page
     assert "(partial: 1 runs missing): n = 3 beats n = 1" in page
     assert len(pd.read_csv(results / "study-seeds.csv")) == 3
+
+
+def test_the_figure_keeps_a_long_title_within_it_and_counts_episodes_in_whole_numbers(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A user's one-panel study with a long title: the title ran off both sides of the figure, and a run of a few
+    # episodes had ticks at half episodes
+    title = "Expected SARSA or not, on CartPole-v1, with the long title that a user may well give their own study"
+    text = TINY.replace("title: Tiny", f"title: {title}").replace("episodes: 6", "episodes: 3")
+    study_file, cache, results = fake_cache(tmp_path, text)
+    for episodes in cache.rglob("episodes.csv"):
+        episodes.write_text("return\n" + "\n".join(episodes.read_text().splitlines()[1:4]) + "\n")
+    drawn: list[matplotlib.figure.Figure] = []
+    monkeypatch.setattr(outputs.plt, "close", drawn.append)
+    command = [str(study_file), "--report-only", "--cache-dir", str(cache), "--results-dir", str(results)]
+    assert studies_cli.main(command) == 0
+    (figure,) = drawn
+    renderer = figure.canvas.get_renderer()  # type: ignore[attr-defined]
+    suptitle = figure.get_suptitle()
+    assert suptitle.replace("\n", " ").startswith(title), suptitle
+    (drawn_title,) = (text for text in figure.findobj(matplotlib.text.Text) if text.get_text() == suptitle)
+    box, frame = drawn_title.get_window_extent(renderer), figure.bbox
+    assert frame.x0 <= box.x0, (box, frame)
+    assert box.x1 <= frame.x1, (box, frame)
+    (axis,) = figure.axes
+    ticks = [tick for tick in axis.get_xticks() if axis.get_xlim()[0] <= tick <= axis.get_xlim()[1]]
+    assert ticks
+    assert all(float(tick).is_integer() for tick in ticks), ticks
 
 
 def test_a_report_of_too_few_seeds_does_not_call_its_intervals_95_percent(

@@ -31,7 +31,7 @@ from stable_baselines3.common.utils import ConstantSchedule, FloatSchedule
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 from torch import nn
 
-from sb3_classic import REINFORCE, NStepSARSA
+from sb3_classic import REINFORCE, NStepSARSA, ObGD
 from sb3_classic.zoo import (
     ALGORITHMS,
     CONVERTERS,
@@ -42,8 +42,10 @@ from sb3_classic.zoo import (
     hyperparams_path,
     maskable_eval_callback,
     one_thread_unless_chosen,
+    policy_kwargs_differences,
     register,
 )
+from sb3_classic.zoo_search import LINEAR, NETWORK, STREAMING, entry_kind, searched_entry
 
 ALGOS = list(ALGORITHMS)
 ENV_IDS = ["CartPole-v1", "Acrobot-v1"]
@@ -52,23 +54,24 @@ ZOO_KEYS = {
     *("n_timesteps", "n_envs", "policy", "normalize", "frame_stack", "callback"),
     *("env_wrapper", "vec_env_wrapper", "env_kwargs", "monitor_kwargs"),
 }
-# The trial parameters of each search space (what a study stores)
-COMMON_SPACE = {
-    "one_minus_gamma",
-    "lr_decay_factor",
-    "lr_decay_every",
-    "n_layers",
-    "layer_size",
-    "activation_fn",
-    "weight_init",
-}
+# The trial parameters of each search space (what a study stores), per kind of YAML entry
+NETWORK_PARAMS = {"n_layers", "layer_size", "activation_fn", "weight_init"}
+COMMON_SPACE = {"one_minus_gamma", "lr_decay_factor", "lr_decay_every"} | NETWORK_PARAMS
+EXPLORATION_SPACE = {"exploration_schedule", "exploration_decay_rate", "exploration_fraction", "exploration_initial_eps"}
+EXPLORATION_SPACE |= {"exploration_final_eps"}
+SARSA_SPACE = COMMON_SPACE | {"n_steps", "learning_rate", "train_freq", "gradient_steps", "expected_sarsa", "td_lambda"}
+SARSA_SPACE |= {"loss_function", "averaging_tau"} | EXPLORATION_SPACE
+STREAMING_NETWORK_PARAMS = NETWORK_PARAMS - {"weight_init"} | {"kappa"}
 SEARCH_SPACES = {
-    "reinforce": COMMON_SPACE | {"learning_rate", "value_learning_rate", "n_episodes", "normalize_advantage", "ent_coef"},
-    "nstep_sarsa": COMMON_SPACE
-    | {"n_steps", "learning_rate", "train_freq", "gradient_steps", "expected_sarsa", "td_lambda", "loss_function"}
-    | {"averaging_tau"}
-    | {"exploration_schedule", "exploration_decay_rate", "exploration_fraction", "exploration_initial_eps"}
-    | {"exploration_final_eps"},
+    "reinforce": {
+        NETWORK: COMMON_SPACE | {"learning_rate", "value_learning_rate", "n_episodes", "normalize_advantage", "ent_coef"},
+        STREAMING: STREAMING_NETWORK_PARAMS | {"value_kappa"},
+    },
+    "nstep_sarsa": {
+        NETWORK: SARSA_SPACE,
+        LINEAR: SARSA_SPACE - NETWORK_PARAMS - {"loss_function"},
+        STREAMING: STREAMING_NETWORK_PARAMS | {"td_lambda", "expected_sarsa"} | EXPLORATION_SPACE,
+    },
 }
 
 # One torch thread per command (the tests run two at a time on two cores); no display
@@ -364,20 +367,38 @@ def test_yaml_entries_are_constructor_arguments(algo: str) -> None:
         ALGORITHMS[algo](entry["policy"], env, device="cpu", **kwargs)
 
 
-@pytest.mark.parametrize("algo", ALGOS)
+def shipped_entries() -> list[tuple[str, str, str]]:
+    """:return: (algo, YAML file, env id) of every entry of the package's YAMLs, the streaming recipe's included"""
+    entries = []
+    for algo in ALGOS:
+        for path in (hyperparams_path(algo), hyperparams_path(f"{algo}_streaming")):
+            entries += [(algo, path.name, env_id) for env_id in yaml.safe_load(path.read_text())]
+    return entries
+
+
+@pytest.mark.parametrize(("algo", "yaml_name", "env_id"), shipped_entries())
 @pytest.mark.parametrize("sampler", [optuna.samplers.RandomSampler, optuna.samplers.TPESampler])
-def test_search_space(algo: str, sampler: Callable[..., optuna.samplers.BaseSampler]) -> None:
+def test_search_space(algo: str, yaml_name: str, env_id: str, sampler: Callable[..., optuna.samplers.BaseSampler]) -> None:
+    entry = yaml.safe_load((hyperparams_path(algo).parent / yaml_name).read_text())[env_id]
+    # The entry as the zoo's objective holds it (policy_kwargs evaluated), over which it puts a trial's values
+    entry = {key: value for key, value in entry.items() if key == "policy" or key not in ZOO_KEYS | {"n_timesteps"}}
+    if "policy_kwargs" in entry:
+        entry["policy_kwargs"] = eval_policy_kwargs(entry["policy_kwargs"])
+    kind = entry_kind(entry)
+    assert kind == (STREAMING if "streaming" in yaml_name else LINEAR if entry["policy"] == "LinearPolicy" else NETWORK)
+
     def objective(trial: optuna.Trial) -> float:
-        hyperparams = SAMPLERS[algo](trial, 0, 1, {})
+        with searched_entry(entry):
+            hyperparams = SAMPLERS[algo](trial, 0, 1, {})
         # rl-zoo3 converts a stored trial with the converter: it must give the same arguments
         assert CONVERTERS[algo](trial.params) == hyperparams
         assert set(hyperparams) <= constructor_arguments(algo)
-        # rl-zoo3 puts them over each YAML entry's (``objective``: kwargs.update(sampled)): every entry the package
+        # rl-zoo3 puts them over the YAML entry's (``objective``: kwargs.update(sampled)): every entry the package
         # ships must give a model the algorithm accepts, or the zoo's study ends (MountainCar-v0's ε of 0.0 under a
-        # sampled floor did); and they replace a decay that would conflict with them
-        total = 0.0
-        for env_id, entry in yaml.safe_load(hyperparams_path(algo).read_text()).items():
-            from_yaml = {key: value for key, value in entry.items() if key not in ZOO_KEYS | {"n_timesteps"}}
+        # sampled floor did, and its LinearPolicy under a sampled network); and they replace a decay that would
+        # conflict with them
+        from_yaml = {key: value for key, value in entry.items() if key != "policy"}
+        if kind != STREAMING:
             from_yaml["lr_decay_milestones"] = [300, 500]
             # A YAML's (or -params') value of a setting the sampled ones exclude: each ended the study when drawn
             # against it (exploration_fraction with 'exponential', a decay rate with 'linear', per-step updates with
@@ -387,21 +408,33 @@ def test_search_space(algo: str, sampler: Callable[..., optuna.samplers.BaseSamp
                 if algo == "nstep_sarsa"
                 else dict(update_mode="per_step")
             )
-            env = env_id if env_id != "default" and env_id in gym.registry else "CartPole-v1"
-            model = ALGORITHMS[algo]("MlpPolicy", env, device="cpu", **{**from_yaml, **hyperparams})
-            total += sum(param.numel() for param in model.policy.parameters())
-        return total
+        env = env_id if env_id != "default" and env_id in gym.registry else "CartPole-v1"
+        model = ALGORITHMS[algo](entry["policy"], env, device="cpu", **{**from_yaml, **hyperparams})
+        # The streaming recipe's trial trains with ObGD (the search had replaced its policy_kwargs by a network's,
+        # Adam per step), a LinearPolicy's with the entry's features
+        optimizer = model.policy.optimizer
+        assert isinstance(optimizer, ObGD) == (kind == STREAMING), type(optimizer)
+        if kind == STREAMING:
+            assert optimizer.defaults["kappa"] == trial.params["kappa"]
+            assert model.policy_kwargs["weight_init"] == "sparse"
+        if kind == LINEAR:
+            assert model.policy_kwargs == entry["policy_kwargs"]
+        return float(sum(param.numel() for param in model.policy.parameters()))
 
     kwargs = {"n_startup_trials": 3, "multivariate": True} if sampler is optuna.samplers.TPESampler else {}
     study = optuna.create_study(sampler=sampler(seed=0, **kwargs))
-    study.optimize(objective, n_trials=8)
+    study.optimize(objective, n_trials=6)
     assert all(trial.state == optuna.trial.TrialState.COMPLETE for trial in study.trials)
-    assert {frozenset(trial.params) for trial in study.trials} == {frozenset(SEARCH_SPACES[algo])}
-    if algo == "nstep_sarsa":
-        # The zoo reports every sampled parameter: the one a trial did not train with is named
-        for trial in study.trials:
-            linear = trial.params["exploration_schedule"] == "linear"
-            assert trial.user_attrs["unused"] == ("exploration_decay_rate" if linear else "exploration_fraction")
+    assert {frozenset(trial.params) for trial in study.trials} == {frozenset(SEARCH_SPACES[algo][kind])}
+    # The zoo reports every sampled parameter: those a trial did not train with are named
+    for trial in study.trials:
+        params, unused = trial.params, set(trial.user_attrs.get("unused", "").split(", ")) - {""}
+        expected = {"lr_decay_every"} if params.get("lr_decay_factor") == 1.0 else set()
+        if algo == "nstep_sarsa":
+            linear = params["exploration_schedule"] == "linear"
+            expected.add("exploration_decay_rate" if linear else "exploration_fraction")
+            expected |= {"td_lambda"} if params.get("n_steps") == 1 else set()
+        assert unused == expected, (params, unused)
 
 
 # --- The zoo's commands --------------------------------------------------------------------------------------------
@@ -818,7 +851,77 @@ def test_optimize(tmp_path: Path, algo: str, storage: str) -> None:
     assert set(states) <= {optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.PRUNED}
     # The median pruner prunes nothing before its 2 startup trials
     assert states[:2] == [optuna.trial.TrialState.COMPLETE] * 2
-    assert all(set(trial.params) == SEARCH_SPACES[algo] for trial in study.trials)
+    assert all(set(trial.params) == SEARCH_SPACES[algo][NETWORK] for trial in study.trials)
+
+
+@pytest.mark.parametrize(
+    ("algo", "env_id", "streaming"),
+    [("nstep_sarsa", "CartPole-v1", True), ("reinforce", "CartPole-v1", True), ("nstep_sarsa", "MountainCar-v0", False)],
+)
+def test_optimize_tunes_what_the_entry_trains_with(tmp_path: Path, algo: str, env_id: str, streaming: bool) -> None:
+    """
+    A streaming entry's search drew a network's settings over it and dropped ObGD (its trials trained with Adam per
+    step, without an error); every trial of MountainCar-v0's LinearPolicy entry drew hidden layers, refused.
+    """
+    url = f"sqlite:///{tmp_path / 'study.db'}"
+    conf = ["-conf", str(hyperparams_path(f"{algo}_streaming"))] if streaming else []
+    args = ["-n", "300", "-optimize", "--n-trials", "2", "--n-startup-trials", "2", "--n-evaluations", "1"]
+    args += ["--eval-episodes", "1", "--no-optim-plots", "--storage", url, "--study-name", "s", *conf]
+    result = zoo(tmp_path, "train", "--algo", algo, "--env", env_id, "--seed", "0", *args)
+    assert "Sampled hyperparams" not in result.stdout, result.stdout[-4000:]
+    study = optuna.load_study(study_name="s", storage=url)
+    assert [trial.state for trial in study.trials] == [optuna.trial.TrialState.COMPLETE] * 2
+    kind = STREAMING if streaming else LINEAR
+    assert all(set(trial.params) == SEARCH_SPACES[algo][kind] for trial in study.trials)
+
+
+def test_hyperparams_path_finds_every_yaml_the_package_ships(tmp_path: Path) -> None:
+    # -conf hyperparams/nstep_sarsa_streaming.yml works from a checkout's root only: the path gives the YAML anywhere
+    for name in ("reinforce", "nstep_sarsa", "reinforce_streaming", "nstep_sarsa_streaming"):
+        path = hyperparams_path(name)
+        assert path.name == f"{name}.yml"
+        assert yaml.safe_load(path.read_text())
+    with pytest.raises(ValueError, match="'dqn' must be one of 'reinforce', 'nstep_sarsa', 'reinforce_streaming'"):
+        hyperparams_path("dqn")
+    # The command that prints it, for -conf "$(python -m sb3_classic.zoo nstep_sarsa_streaming)"
+    printed = run(tmp_path, "-W", "error", "-m", "sb3_classic.zoo", "nstep_sarsa_streaming").stdout
+    assert printed == f"{hyperparams_path('nstep_sarsa_streaming')}\n"
+
+
+def test_policy_kwargs_differences() -> None:
+    entry: dict[str, Any] = {"net_arch": [32], "optimizer_class": ObGD, "optimizer_kwargs": {"kappa": 2.0}}
+    saved: dict[str, Any] = {"net_arch": [32], "optimizer_kwargs": {"kappa": 2.0, "lr": 1.0}, "weight_init": "sparse"}
+    assert policy_kwargs_differences(entry, saved) == [f"optimizer_class: {ObGD!r} in the YAML, None in the model"]
+    saved |= {"optimizer_class": ObGD, "optimizer_kwargs": {"kappa": 3.0}}
+    assert policy_kwargs_differences(entry, saved) == ["optimizer_kwargs['kappa']: 2.0 in the YAML, 3.0 in the model"]
+    assert policy_kwargs_differences(entry, saved | {"optimizer_kwargs": {"kappa": 2.0}}) == []
+    # As a saved model gives them back: a tuple as a list (SB3 saves JSON-able policy_kwargs as JSON), arrays (a
+    # TileCoding's bounds) by their elements, where comparing them raised
+    tiles = {"features_extractor_kwargs": {"low": np.array([-1.2, -0.07]), "high": np.array([0.6, 0.07])}}
+    assert policy_kwargs_differences({"net_arch": (8,), **tiles}, {"net_arch": [8], **tiles}) == []
+    moved = {"features_extractor_kwargs": {"low": np.array([-1.2, -0.07]), "high": np.array([0.6, 0.08])}}
+    assert len(policy_kwargs_differences(tiles, moved)) == 1
+    # An entry that leaves the optimizer to its default (Adam) for a model trained with ObGD
+    assert policy_kwargs_differences({"net_arch": [32]}, {"net_arch": [32], "optimizer_class": ObGD}) == [
+        f"optimizer_class: None in the YAML, {ObGD!r} in the model"
+    ]
+
+
+def test_continuing_a_model_with_another_networks_yaml_is_refused(tmp_path: Path) -> None:
+    """
+    The zoo drops the YAML's policy_kwargs on -i but passes its other settings: the streaming entry's learning_rate
+    of 1.0 (ObGD's α) trained a model of the default entry's Adam to a loss of 6e18, without a word.
+    """
+    train(tmp_path, "nstep_sarsa", "CartPole-v1", "-n", "200")
+    trained_agent = str(tmp_path / "logs" / "nstep_sarsa" / "CartPole-v1_1" / "CartPole-v1.zip")
+    streaming = str(hyperparams_path("nstep_sarsa_streaming"))
+    args = ["--algo", "nstep_sarsa", "--env", "CartPole-v1", "-n", "200", "-i", trained_agent, "-conf", streaming]
+    result = zoo(tmp_path, "train", *args, check=False)
+    assert result.returncode != 0
+    message = " ".join(result.stderr.split())
+    assert "the YAML entry's policy_kwargs differ from the model's (net_arch: [128, 128] in the YAML, [256, 256]" in message
+    assert "continue with the settings the model was trained with (its -conf, -params or --trial-id)" in message
+    assert not (tmp_path / "logs" / "nstep_sarsa" / "CartPole-v1_2" / "CartPole-v1.zip").exists()
 
 
 @pytest.mark.parametrize("algo", ALGOS)

@@ -486,7 +486,7 @@ def check_adam(name: str, optimizer: th.optim.Optimizer, label: str = "optimizer
         return
     raise TypeError(
         f"{name}: {label} {found}: a population's optimizers are Adam without weight decay, AMSGrad or maximize "
-        "(StackedAdam); leave optimizer_class and those kwargs out"
+        "(StackedAdam); to train seeds together, leave optimizer_class and those kwargs out"
     )
 
 

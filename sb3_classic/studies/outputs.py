@@ -8,6 +8,7 @@ import hashlib
 import json
 import math
 import shlex
+import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,6 +22,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 import yaml
+from matplotlib.ticker import MaxNLocator
 
 import sb3_classic
 from sb3_classic.harness.common import RunSpec, code_versions
@@ -37,6 +39,8 @@ NOT_RUN = "not yet run"
 PROGRAM = "sb3_classic.studies"
 #: The panels (one per reading) in a row of a study's figure
 MAX_PANEL_COLUMNS = 4
+#: Characters of the figure's title per inch of its width (at its font size, 10 points), where a line wraps
+TITLE_CHARACTERS_PER_INCH = 12
 #: STUDIES.md names each other reading's verdict of a claim up to this many readings, and sums them up beyond
 MAX_LISTED_READINGS = 3
 #: Beside a verdict in STUDIES.md where the compared variants stayed at a random policy's return (``stats.untrained_note``)
@@ -394,6 +398,7 @@ def plot_study(results: StudyResults, path: Path) -> Path:
         if has_threshold(study):
             axis.axhline(study.threshold, color="grey", linestyle=":", linewidth=1)
         axis.set_xlabel("Episode")
+        axis.xaxis.set_major_locator(MaxNLocator(integer=True))
         axis.set_title(reading if len(readings) > 1 else study.env_id, fontsize=10)
         if axis.lines[:-1]:
             axis.legend(fontsize=8, loc="best")
@@ -403,7 +408,10 @@ def plot_study(results: StudyResults, path: Path) -> Path:
     smooth = f", moving average of {study.smooth} episodes" if study.smooth > 1 else ""
     for row in axes:
         row[0].set_ylabel("Training return")
-    figure.suptitle(f"{study.title}\nmean over seeds with its {_band(_fewest_seeds(results))}{smooth}", fontsize=10)
+    title = [study.title, f"mean over seeds with its {_band(_fewest_seeds(results))}{smooth}"]
+    width = int(TITLE_CHARACTERS_PER_INCH * figure.get_figwidth())
+    lines = [line for text in title for line in text.splitlines()]
+    figure.suptitle("\n".join(textwrap.fill(line, width) for line in lines), fontsize=10)
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(path, dpi=110)
     plt.close(figure)
