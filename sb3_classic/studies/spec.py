@@ -479,10 +479,6 @@ class _Checker:
         return False
 
 
-_ONE_OF_VARY_VARIANTS = "give exactly one of `vary:` (one axis: {n_steps: [1, 5, 10]}) and `variants:` (named overrides)"
-_ONE_OF_CLAIM_CLAIMS = "give exactly one of `claim:` (one claim) and `claims:` (a list)"
-
-
 def _check_top_level(check: _Checker, data: Mapping[str, Any]) -> None:
     """The file's fields: each known, the required ones given; raises at once only for a missing one, which the other
     fields are read from (an unknown field is said with every other problem of the file)"""
@@ -496,9 +492,11 @@ def _check_top_level(check: _Checker, data: Mapping[str, Any]) -> None:
     for key in missing:
         check.fail(key, "missing (a study needs env, algo, budget, hyperparams, variants or vary, and a claim)")
     if ("vary" in data) == ("variants" in data):
-        check.fail("variants", _ONE_OF_VARY_VARIANTS)
+        check.fail(
+            "variants", "give exactly one of `vary:` (one axis: {n_steps: [1, 5, 10]}) and `variants:` (named overrides)"
+        )
     if ("claim" in data) == ("claims" in data):
-        check.fail("claim", _ONE_OF_CLAIM_CLAIMS)
+        check.fail("claim", "give exactly one of `claim:` (one claim) and `claims:` (a list)")
     if missing:
         check.raise_if_any()
 
@@ -856,8 +854,7 @@ def _budget(check: _Checker, value: Any) -> Budget | None:
 
 
 def _variants(check: _Checker, data: Mapping[str, Any], algo: str) -> dict[str, dict[str, Any]]:
-    if ("vary" in data) == ("variants" in data):
-        check.fail("variants", _ONE_OF_VARY_VARIANTS)
+    if ("vary" in data) == ("variants" in data):  # (said by _check_top_level)
         return {}
     if "vary" in data:
         vary = data["vary"]
@@ -978,8 +975,7 @@ def _check_return_levels(
 
 
 def _claims(check: _Checker, data: Mapping[str, Any], variants: Mapping[str, Any], threshold: float) -> tuple[Claim, ...]:
-    if ("claim" in data) == ("claims" in data):
-        check.fail("claim", _ONE_OF_CLAIM_CLAIMS)
+    if ("claim" in data) == ("claims" in data):  # (said by _check_top_level)
         return ()
     raw: Sequence[Any] = [data["claim"]] if "claim" in data else data["claims"]
     if not isinstance(raw, list | tuple) or not raw:
